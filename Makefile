@@ -1,0 +1,41 @@
+# fr5_rl: every target sets itself up first (tools/setup.sh is idempotent and fast when
+# nothing changed). `make demo` and `make test` are the two commands a new user needs.
+SHELL := /bin/bash
+.SHELLFLAGS := -eo pipefail -c
+ENV := set +u; source env.sh; set -u;
+TASK ?= reach
+ALGO ?= ppo
+EPISODES ?= 5
+
+.PHONY: setup demo test test-unit test-ros bench train evaluate meshes lint clean help
+
+help:
+	@echo "make demo   - set up, then run the closed loop (simulator + policy) with the shipped model"
+	@echo "make test   - set up, then run the whole test suite (pytest + rostest)"
+	@echo "make bench  - set up, then run the benchmarks; figures printed and written to bench/results/"
+	@echo "make train  - set up, then train (TASK=reach|grasp ALGO=ppo|sac|td3|tqc)"
+	@echo "make setup  - only the set-up"
+
+setup:
+	@bash tools/setup.sh
+
+demo: setup
+	@$(ENV) bash tools/demo.sh $(EPISODES)
+
+test: setup
+	@$(ENV) bash tools/run_tests.sh
+
+bench: setup
+	@$(ENV) python tools/bench.py
+
+train: setup
+	@$(ENV) rosrun fr5_rl train.py --task $(TASK) --algo $(ALGO)
+
+meshes: setup
+	@$(ENV) python tools/generate_description.py
+
+lint: setup
+	@$(ENV) catkin_lint -W1 .
+
+clean:
+	rm -rf .venv .catkin_ws env.sh runs bench/results
