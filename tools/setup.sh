@@ -23,7 +23,7 @@ debian_ros_packages=(
   python3-rosservice rosbash ros-robot-state-publisher joint-state-publisher rviz
   python3-tf2-ros python3-tf2-geometry-msgs python3-sensor-msgs python3-geometry-msgs
   python3-std-msgs python3-std-srvs python3-visualization-msgs ros-diagnostic-msgs python3-diagnostic-msgs
-  catkin liburdfdom-tools catkin-lint python3-venv python3-pip
+  catkin librostest-dev liburdfdom-tools catkin-lint python3-venv python3-pip
   xvfb x11-apps imagemagick
 )
 # The same on Ubuntu 20.04 with the ROS Noetic apt repository.
@@ -88,7 +88,7 @@ if [ ! -f "$stamps/catkin-$build_hash" ] || [ ! -f "$ws/devel/setup.bash" ]; the
   log "building catkin workspace $ws"
   (
     set +u; [ "$ros_flavour" = noetic ] && source /opt/ros/noetic/setup.bash; set -u
-    cd "$ws" && catkin_make -DPYTHON_EXECUTABLE="$ros_python" -DCATKIN_ENABLE_TESTING=ON >"$ws/build.log" 2>&1
+    cd "$ws" && catkin_make -DPYTHON_EXECUTABLE="$venv/bin/python" -DCATKIN_ENABLE_TESTING=ON >"$ws/build.log" 2>&1
   ) || { echo "[setup] catkin_make failed, see $ws/build.log" >&2; tail -30 "$ws/build.log" >&2; exit 1; }
   rm -f "$stamps"/catkin-*; touch "$stamps/catkin-$build_hash"
 fi
