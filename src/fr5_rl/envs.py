@@ -1,0 +1,222 @@
+"""Gymnasium environments FR5Reach-v0 and FR5Grasp-v0: a world, a robot and a task composed.
+
+One ``step`` is one 50 Hz control period: the action goes through the same
+:class:`~fr5_rl.control.JointCommandShaper` the ROS policy node uses, the simulated position
+controller tracks it for ``control_dt`` seconds, and the observation is built by the same
+:class:`~fr5_rl.observation.ObservationBuilder` from measured joint state.
+"""
+from __future__ import annotations
+
+from collections import deque
+from typing import Any, Dict, Mapping, Optional, Tuple
+
+import gymnasium as gym
+import numpy as np
+import pybullet as p
+from gymnasium import spaces
+
+from .config import load_env_config, load_robot_spec
+from .control import ACTION_SIZE, JointCommandShaper
+from .kinematics import ForwardKinematics
+from .observation import ObservationBuilder, ObservationInputs
+from .sim.robot import FR5Robot
+from .sim.world import PyBulletWorld
+from .tasks import GraspTask, ReachTask, Task, TaskState
+
+TASKS = {"reach": ReachTask, "grasp": GraspTask}
+
+
+class FR5Env(gym.Env):
+    """FR5 + gripper in PyBullet. Observation and action layouts: see fr5_rl.observation and
+    fr5_rl.control. ``info`` carries ``is_success``, ``failure`` and every reward part.
+
+    Args:
+        task: "reach" or "grasp".
+        config: overrides merged into ``config/env.yaml`` (unknown keys are refused).
+        render_mode: None, "rgb_array" (headless TinyRenderer) or "human" (PyBullet GUI).
+    """
+
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 50}
+
+    def __init__(self, task: str = "reach", config: Optional[Mapping[str, Any]] = None,
+                 render_mode: Optional[str] = None) -> None:
+        super().__init__()
+        if task not in TASKS:
+            raise ValueError(f"unknown task '{task}'; choose one of {sorted(TASKS)}")
+        if render_mode not in (None, "rgb_array", "human"):
+            raise ValueError(f"render_mode must be None, 'rgb_array' or 'human', got {render_mode!r}")
+        self.cfg = load_env_config(config)
+        self.robot_spec = load_robot_spec()
+        self.render_mode = render_mode
+        self.control_dt = float(self.cfg["simulation"]["control_dt"])
+        self.task: Task = TASKS[task](self.cfg, self.robot_spec.max_opening_width)
+        self.kinematics = ForwardKinematics(self.robot_spec)
+        self.shaper = JointCommandShaper(self.robot_spec, self.cfg["action"], self.control_dt)
+        self.observation_builder = ObservationBuilder(self.robot_spec, self.cfg["observation"], self.task.include_lift)
+        self.observation_space = spaces.Box(-1.0, 1.0, (self.observation_builder.size,), dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
+
+        self.world = PyBulletWorld(self.cfg["simulation"], gui=render_mode == "human")
+        self.world.add_table(self.cfg["table"])
+        self.robot = FR5Robot(self.world.client, self.robot_spec, self.cfg["simulation"])
+        # The robot stands on the table: its base never counts as touching it.
+        for link in (-1, 0):
+            p.setCollisionFilterPair(self.robot.body, self.world.table_id, link, -1, 0,
+                                     physicsClientId=self.world.client)
+        obj = self.cfg["object"]
+        self._object_rest_height = 0.0
+        self._object_start = np.zeros(3)
+        self._gripper_command_width = self.robot_spec.max_opening_width
+        self._action_queue: deque = deque()
+        self._latency_steps = 0
+        self._obs_noise_std = 0.0
+        self._steps = 0
+        self._measured_joint_positions = self.robot_spec.home_joint_positions.copy()
+        self._workspace_low = np.asarray(self.cfg["workspace"]["low"])
+        self._workspace_high = np.asarray(self.cfg["workspace"]["high"])
+        self._object_cfg = obj
+
+    # ------------------------------------------------------------------ gym API
+    def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None
+              ) -> Tuple[np.ndarray, Dict[str, Any]]:
+        super().reset(seed=seed)
+        rng = self.np_random
+        self._apply_randomisation(rng)
+        low, high = np.asarray(self._object_cfg["region_low"]), np.asarray(self._object_cfg["region_high"])
+        xy = rng.uniform(low, high) if not options or "object_xy" not in options else np.asarray(options["object_xy"])
+        table_top = float(self.cfg["table"]["top_height"])
+        self._object_start = np.array([xy[0], xy[1], table_top + self._object_rest_height])
+        self.world.place_object(self._object_start, yaw=float(rng.uniform(-np.pi, np.pi)))
+
+        noise = float(self.cfg[self.task.name]["start_joint_noise"])
+        start = self.robot_spec.home_joint_positions + rng.uniform(-noise, noise, 6)
+        start = np.clip(start, self.robot_spec.lower_limits, self.robot_spec.upper_limits)
+        self._gripper_command_width = self.robot_spec.max_opening_width
+        self.robot.reset(start, self._gripper_command_width)
+        self.shaper.reset()
+        self.task.reset()
+        self._action_queue.clear()
+        self._steps = 0
+        state, obs = self._observe()
+        self.task.prime(state)
+        return obs, {"is_success": False, "failure": None, "object_start": self._object_start.copy()}
+
+    def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:
+        action = np.asarray(action, dtype=np.float64).reshape(-1)
+        if action.shape != (ACTION_SIZE,):
+            raise ValueError(f"action must have {ACTION_SIZE} values, got shape {action.shape}")
+        if not np.isfinite(action).all():
+            raise ValueError("action contains NaN or inf")
+        action = np.minimum(np.maximum(action, -1.0), 1.0)
+        applied = self._delayed(action)
+        # The joint state measured by the last observation is still current: nothing moved since.
+        targets = self.shaper.arm_targets(applied, self._measured_joint_positions)
+        self._gripper_command_width = self.shaper.gripper_width(applied)
+        self.robot.command(targets, self._gripper_command_width)
+        self.world.step()
+        self._steps += 1
+
+        state, obs = self._observe()
+        outcome = self.task.judge(state, self.control_dt)
+        parts = self.task.reward(outcome, action)
+        terminated = outcome.success or outcome.failure is not None
+        truncated = not terminated and self._steps >= self.task.max_steps
+        info: Dict[str, Any] = {"is_success": outcome.success, "failure": outcome.failure}
+        info.update({f"reward_{name}": value for name, value in parts.items()})
+        info.update({f"term_{name}": value for name, value in outcome.terms.items()})
+        if truncated:
+            info["failure"] = "timeout"
+        if self.render_mode == "human":
+            self.render()
+        return obs, float(sum(parts.values())), terminated, truncated, info
+
+    def render(self) -> Optional[np.ndarray]:
+        if self.render_mode == "rgb_array":
+            return self.world.render()
+        return None
+
+    def close(self) -> None:
+        self.world.close()
+
+    # ------------------------------------------------------------------ inspection
+    def tcp_position(self) -> np.ndarray:
+        """tcp position in the world (= base_link) frame, metres, from the simulator."""
+        return self.robot.tcp_pose_from_simulator()[0]
+
+    def object_position(self) -> np.ndarray:
+        """Object centre in the world (= base_link) frame, metres."""
+        return self.world.object_pose()[0]
+
+    def joint_positions(self) -> np.ndarray:
+        """Measured arm joint angles (rad), controller order."""
+        return self.robot.joint_state()[0]
+
+    # ------------------------------------------------------------------ internals
+    def _delayed(self, action: np.ndarray) -> np.ndarray:
+        """Apply the configured action latency (whole control steps; 0 = none)."""
+        if self._latency_steps == 0:
+            return action
+        self._action_queue.append(action)
+        if len(self._action_queue) <= self._latency_steps:
+            hold = np.zeros(ACTION_SIZE)
+            hold[6] = self.shaper.gripper_action(self._gripper_command_width)
+            return hold
+        return self._action_queue.popleft()
+
+    def _observe(self) -> Tuple[TaskState, np.ndarray]:
+        q, qd, width = self.robot.joint_state()
+        self._measured_joint_positions = q
+        tcp_position, tcp_rotation = self.robot.tcp_pose_from_simulator()
+        object_position, object_quaternion = self.world.object_pose()
+        object_up = p.getMatrixFromQuaternion(object_quaternion)[2::3]
+        table, obj, finger_links = self.world.table_id, self.world.object_id, self.robot.finger_links
+        table_contact = arm_object_contact = False
+        pads = set()
+        for contact in self.robot.contacts():  # one query for all of the robot's contacts
+            if contact[2] == table:
+                table_contact = True
+            elif contact[2] == obj:
+                if contact[3] in finger_links:
+                    pads.add(contact[3])
+                else:
+                    arm_object_contact = True
+        state = TaskState(
+            tcp_position=tcp_position, tcp_rotation=tcp_rotation, gripper_width=width,
+            tcp_to_object_distance=float(np.sqrt(((object_position - tcp_position) ** 2).sum())),
+            object_position=object_position, object_up_axis=object_up,
+            object_start_position=self._object_start, robot_table_contact=table_contact,
+            arm_object_contact=arm_object_contact, fingers_object_contact=len(pads),
+            tcp_in_workspace=bool((tcp_position >= self._workspace_low).all()
+                                  and (tcp_position <= self._workspace_high).all()),
+        )
+        if self._obs_noise_std > 0.0:
+            rng = self.np_random
+            q = q + rng.normal(0.0, self._obs_noise_std, 6)
+            object_position = object_position + rng.normal(0.0, self._obs_noise_std, 3)
+            tcp_position, tcp_rotation = self.kinematics.tcp_pose(q)
+        inputs = ObservationInputs(
+            joint_positions=q, joint_velocities=qd, gripper_width=width,
+            gripper_command_width=self._gripper_command_width, tcp_position=tcp_position,
+            tcp_rotation=tcp_rotation, object_position=object_position,
+            object_lift=float(object_position[2] - self._object_start[2]),
+        )
+        return state, self.observation_builder.build(inputs)
+
+    def _apply_randomisation(self, rng: np.random.Generator) -> None:
+        """Object size/mass/friction, joint damping, latency, observation noise (if enabled)."""
+        obj, rnd = self._object_cfg, self.cfg["randomisation"]
+        on = bool(rnd["enabled"])
+        size = rng.uniform(*rnd["object_size_scale"]) if on else 1.0
+        mass = float(obj["mass"]) * (rng.uniform(*rnd["object_mass_scale"]) if on else 1.0)
+        friction = float(obj["lateral_friction"]) * (rng.uniform(*rnd["friction_scale"]) if on else 1.0)
+        if obj["shape"] == "cylinder":
+            dims = (float(obj["radius"]) * size, float(obj["height"]) * size)
+            self._object_rest_height = dims[1] / 2.0
+        else:
+            dims = (float(obj["half_extent"]) * size,)
+            self._object_rest_height = dims[0]
+        self.world.set_object(str(obj["shape"]), dims, mass, friction)
+        self.robot.set_joint_damping(rng.uniform(*rnd["joint_damping"]) if on else 0.0)
+        lo, hi = (int(v) for v in rnd["action_latency_steps"])
+        self._latency_steps = int(rng.integers(lo, hi + 1)) if on else 0
+        self._obs_noise_std = float(rnd["observation_noise_std"]) if on else 0.0

@@ -1,0 +1,116 @@
+"""A scripted expert for both tasks: inverse-kinematics waypoints turned into actions.
+
+It reads the simulator's ground truth (object pose, joint state) and emits the same 7-D
+actions a policy would, so it exercises the full action path. Used as a baseline, by the
+tests (a task that the expert cannot solve is a broken task), and for demonstrations.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+import pybullet as p
+
+from .envs import FR5Env
+
+
+class ScriptedExpert:
+    """Waypoint expert: above the object -> down to it -> (grasp) close -> lift and hold."""
+
+    hover_height = 0.10  # m above the object centre before descending
+    lift_clearance = 0.10  # m of lift the expert aims for (the task needs lift_height)
+    waypoint_tolerance = 0.01  # m
+    grasp_height_offset = 0.01  # m above the object centre where the fingers close
+    cartesian_step = 0.02  # m per control step along the straight line to the waypoint (1 m/s)
+
+    def __init__(self, env) -> None:
+        self.env: FR5Env = env.unwrapped
+        spec = self.env.robot_spec
+        home_position, home_rotation = self.env.kinematics.tcp_pose(spec.home_joint_positions)
+        # Keep the home pose's tcp yaw: only the approach axis matters to the tasks.
+        self._down_quaternion = _quaternion_from_matrix(home_rotation)
+        self._lower = spec.lower_limits.tolist() + [0.0, 0.0]
+        self._upper = spec.upper_limits.tolist() + [spec.finger_travel] * 2
+        self._ranges = [u - l for u, l in zip(self._upper, self._lower)]
+        self._rest = spec.home_joint_positions.tolist() + [0.0, 0.0]
+        self._max_step = float(self.env.cfg["action"]["max_joint_step"])
+        self.phase = "hover"
+        self._phase_steps = 0
+
+    def reset(self) -> None:
+        """Call after env.reset()."""
+        self.phase = "hover"
+        self._phase_steps = 0
+
+    def _set_phase(self, phase: str) -> None:
+        self.phase, self._phase_steps = phase, 0
+
+    def act(self, observation: Optional[np.ndarray] = None) -> np.ndarray:
+        """Next action in [-1, 1]^7 (the observation is unused: the expert reads the simulator)."""
+        env = self.env
+        q, _, width = env.robot.joint_state()
+        tcp, _ = env.kinematics.tcp_pose(q)
+        obj = env.object_position()
+        grasp = env.task.name == "grasp"
+        self._phase_steps += 1
+        gripper_open = True
+        if self.phase == "hover":
+            target = obj + np.array([0.0, 0.0, self.hover_height])
+            if np.linalg.norm(target - tcp) < self.waypoint_tolerance:
+                self._set_phase("descend")
+        if self.phase == "descend":
+            # Grasp a little above the centre: the palm then clears the object's top.
+            target = obj + np.array([0.0, 0.0, self.grasp_height_offset if grasp else 0.0])
+            if grasp and np.linalg.norm(target - tcp) < 0.006:
+                self._set_phase("close")
+        if self.phase == "close":
+            target, gripper_open = tcp.copy(), False
+            # The fingers need ~0.4 s to close on the object from fully open.
+            if self._phase_steps > 25:
+                self._set_phase("lift")
+        if self.phase == "lift":
+            gripper_open = False
+            target = env._object_start + np.array([0.0, 0.0, self.lift_clearance])
+        # Straight-line Cartesian motion: IK for a point at most cartesian_step along the line.
+        offset = target - tcp
+        distance = float(np.linalg.norm(offset))
+        # Slow down near the waypoint (the arm lags its command by a few control steps).
+        step = min(self.cartesian_step, 0.25 * distance)
+        if distance > step:
+            target = tcp + offset * (step / distance)
+        q_target = self._inverse_kinematics(target)
+        delta = (q_target - q) / self._max_step
+        # Scale the whole joint step (not per joint) so the motion keeps its direction.
+        action = np.zeros(7)
+        action[:6] = delta / max(1.0, float(np.max(np.abs(delta))))
+        action[6] = 1.0 if gripper_open else -1.0
+        return action.astype(np.float32)
+
+    def _inverse_kinematics(self, tcp_target: np.ndarray) -> np.ndarray:
+        env = self.env
+        solution = p.calculateInverseKinematics(
+            env.robot.body, env.robot.tcp_link, tcp_target.tolist(), self._down_quaternion,
+            lowerLimits=self._lower, upperLimits=self._upper, jointRanges=self._ranges,
+            restPoses=self._rest, maxNumIterations=60, residualThreshold=1e-5,
+            physicsClientId=env.world.client,
+        )
+        return np.asarray(solution[:6])
+
+
+def _quaternion_from_matrix(rotation: np.ndarray) -> list:
+    """3x3 rotation -> (x, y, z, w) quaternion (robust branch selection)."""
+    m = rotation
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0:
+        s = 2.0 * np.sqrt(trace + 1.0)
+        w, x, y, z = 0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        w, x, y, z = (m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        w, x, y, z = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s
+    else:
+        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        w, x, y, z = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s
+    return [float(x), float(y), float(z), float(w)]

@@ -1,0 +1,124 @@
+"""The FR5 with its gripper in a PyBullet world: loading, joint maps, commands, state."""
+from __future__ import annotations
+
+import hashlib
+import tempfile
+from pathlib import Path
+from typing import Any, Dict, Mapping, Tuple
+
+import numpy as np
+import pybullet as p
+
+from ..config import RobotSpec, package_root
+
+
+def urdf_for_pybullet(urdf_path: Path | None = None) -> str:
+    """Path of a copy of the package URDF that PyBullet can load.
+
+    PyBullet does not resolve ``package://fr5_rl/`` mesh URIs, so the copy has them replaced by
+    the package root. The copy is cached in the temp directory under a content hash.
+    """
+    root = package_root()
+    urdf_path = urdf_path or root / "urdf" / "fr5.urdf"
+    if not urdf_path.is_file():
+        raise FileNotFoundError(
+            f"{urdf_path} is missing; regenerate it with `python tools/generate_description.py`"
+        )
+    text = urdf_path.read_text(encoding="utf-8").replace("package://fr5_rl/", f"{root}/")
+    digest = hashlib.sha1(text.encode("utf-8")).hexdigest()[:16]
+    resolved = Path(tempfile.gettempdir()) / f"fr5_rl_{digest}.urdf"
+    if not resolved.is_file():
+        tmp = resolved.with_suffix(f".{id(text)}.tmp")
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(resolved)  # atomic: parallel workers may race here
+    return str(resolved)
+
+
+class FR5Robot:
+    """FR5 arm + PGI-140-80 gripper under position control, as the real driver exposes it.
+
+    Joint positions are in rad (controller order ``j1`` … ``j6``); the gripper is commanded as
+    an opening width in metres, split evenly between the two mirrored fingers.
+    """
+
+    def __init__(self, client: int, robot: RobotSpec, sim_cfg: Mapping[str, Any]) -> None:
+        self.client = client
+        self.spec = robot
+        self.body = p.loadURDF(
+            urdf_for_pybullet(), basePosition=[0, 0, 0], useFixedBase=True,
+            flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client,
+        )
+        joint_index: Dict[str, int] = {}
+        link_index: Dict[str, int] = {}
+        for index in range(p.getNumJoints(self.body, physicsClientId=client)):
+            info = p.getJointInfo(self.body, index, physicsClientId=client)
+            joint_index[info[1].decode()] = index
+            link_index[info[12].decode()] = index
+        try:
+            self.arm_joints = [joint_index[name] for name in robot.joint_names]
+            self.finger_joints = [joint_index[name] for name in robot.finger_joint_names]
+            self.tcp_link = link_index[robot.tcp_frame]
+        except KeyError as missing:
+            raise RuntimeError(f"urdf/fr5.urdf lacks joint or link {missing}; regenerate it") from None
+        self.all_joints = self.arm_joints + self.finger_joints
+        self.link_index = link_index
+        self.finger_links = {index for index in self.finger_joints}
+        n_arm = len(self.arm_joints)
+        # One motor call for all eight joints: per-joint forces and gains in one list each.
+        self._forces = robot.effort_limits.tolist() + [robot.finger_effort] * 2
+        self._position_gains = [float(sim_cfg["arm_position_gain"])] * n_arm + [float(sim_cfg["finger_position_gain"])] * 2
+        self._velocity_gains = [float(sim_cfg["arm_velocity_gain"])] * n_arm + [1.0, 1.0]
+        self._finger_travel = robot.finger_travel
+        for index in self.finger_joints:
+            p.changeDynamics(self.body, index, maxJointVelocity=robot.finger_velocity, physicsClientId=client)
+        for index, velocity in zip(self.arm_joints, robot.velocity_limits):
+            p.changeDynamics(self.body, index, maxJointVelocity=float(velocity), physicsClientId=client)
+
+    # ------------------------------------------------------------------ commands
+    def reset(self, joint_positions: np.ndarray, opening_width: float) -> None:
+        """Teleport to a configuration at rest and hold it (start of an episode)."""
+        finger = opening_width / 2.0
+        for index, angle in zip(self.arm_joints, joint_positions):
+            p.resetJointState(self.body, index, float(angle), 0.0, physicsClientId=self.client)
+        for index in self.finger_joints:
+            p.resetJointState(self.body, index, finger, 0.0, physicsClientId=self.client)
+        self.command(joint_positions, opening_width)
+
+    def command(self, joint_targets: np.ndarray, opening_width: float) -> None:
+        """Send position targets: arm (rad) and gripper opening width (m)."""
+        finger = min(max(opening_width / 2.0, 0.0), self._finger_travel)
+        targets = list(joint_targets)
+        targets += (finger, finger)
+        p.setJointMotorControlArray(
+            self.body, self.all_joints, p.POSITION_CONTROL, targetPositions=targets,
+            forces=self._forces, positionGains=self._position_gains, velocityGains=self._velocity_gains,
+            physicsClientId=self.client,
+        )
+
+    def set_joint_damping(self, damping: float) -> None:
+        """Viscous damping (N*m*s/rad) on every arm joint (domain randomisation)."""
+        for index in self.arm_joints:
+            p.changeDynamics(self.body, index, jointDamping=float(damping), physicsClientId=self.client)
+
+    # ------------------------------------------------------------------ state
+    def joint_state(self) -> Tuple[np.ndarray, np.ndarray, float]:
+        """Measured arm positions (rad), velocities (rad/s) and gripper opening width (m)."""
+        states = p.getJointStates(self.body, self.all_joints, physicsClientId=self.client)
+        positions = np.array([s[0] for s in states[:6]])
+        velocities = np.array([s[1] for s in states[:6]])
+        width = states[6][0] + states[7][0]
+        return positions, velocities, float(width)
+
+    def tcp_pose_from_simulator(self) -> Tuple[np.ndarray, np.ndarray]:
+        """tcp position (m) and 3x3 rotation in base_link, as the simulator computes them.
+
+        Equal to :class:`fr5_rl.kinematics.ForwardKinematics` (the ROS node's FK) to < 1e-6 m;
+        the test suite checks it. The environment uses this one because it is already computed.
+        """
+        state = p.getLinkState(self.body, self.tcp_link, computeForwardKinematics=1, physicsClientId=self.client)
+        rotation = np.array(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)
+        return np.array(state[4]), rotation
+
+    def contacts(self) -> list:
+        """All contact points (PyBullet tuples) of the robot found by the last physics step."""
+        return p.getContactPoints(bodyA=self.body, physicsClientId=self.client)

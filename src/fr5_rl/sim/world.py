@@ -1,0 +1,138 @@
+"""A PyBullet world with a table and one graspable object; one instance per environment.
+
+Every call passes ``physicsClientId`` so several worlds coexist in one process.
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping, Optional, Sequence, Tuple
+
+import numpy as np
+import pybullet as p
+
+
+class PyBulletWorld:
+    """Owns one PyBullet client: physics settings, the table, the object, stepping."""
+
+    def __init__(self, sim_cfg: Mapping[str, Any], gui: bool = False) -> None:
+        self.client = p.connect(p.GUI if gui else p.DIRECT)
+        if self.client < 0:
+            raise RuntimeError("PyBullet could not connect (is another GUI instance open?)")
+        self.physics_dt = float(sim_cfg["physics_dt"])
+        self.substeps = int(round(float(sim_cfg["control_dt"]) / self.physics_dt))
+        p.setTimeStep(self.physics_dt, physicsClientId=self.client)
+        p.setGravity(0.0, 0.0, float(sim_cfg["gravity"]), physicsClientId=self.client)
+        p.setPhysicsEngineParameter(
+            numSolverIterations=int(sim_cfg["solver_iterations"]),
+            deterministicOverlappingPairs=1,
+            physicsClientId=self.client,
+        )
+        if gui:
+            p.configureDebugVisualizer(p.COV_ENABLE_GUI, 0, physicsClientId=self.client)
+        self.table_id: Optional[int] = None
+        self.object_id: Optional[int] = None
+        self._object_shape: Optional[Tuple] = None
+
+    # ------------------------------------------------------------------ scene
+    def add_table(self, table_cfg: Mapping[str, Any]) -> int:
+        """Static box whose top face lies at ``top_height`` in base_link; returns its body id."""
+        sx, sy, thickness = (float(v) for v in table_cfg["size"])
+        half = [sx / 2.0, sy / 2.0, thickness / 2.0]
+        cx, cy = (float(v) for v in table_cfg["center_xy"])
+        top = float(table_cfg["top_height"])
+        collision = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=self.client)
+        visual = p.createVisualShape(
+            p.GEOM_BOX, halfExtents=half, rgbaColor=[0.55, 0.42, 0.3, 1.0], physicsClientId=self.client
+        )
+        self.table_id = p.createMultiBody(
+            0.0, collision, visual, [cx, cy, top - thickness / 2.0], physicsClientId=self.client
+        )
+        p.changeDynamics(
+            self.table_id, -1, lateralFriction=float(table_cfg["lateral_friction"]), physicsClientId=self.client
+        )
+        return self.table_id
+
+    def set_object(self, shape: str, dims: Tuple[float, ...], mass: float, friction: float) -> int:
+        """Create (or re-create when its size changed) the object; returns its body id.
+
+        ``dims`` is (radius, height) for a cylinder, (half_extent,) for a cube, in metres.
+        """
+        key = (shape, tuple(round(d, 6) for d in dims))
+        if self.object_id is None or key != self._object_shape:
+            if self.object_id is not None:
+                p.removeBody(self.object_id, physicsClientId=self.client)
+            if shape == "cylinder":
+                radius, height = dims
+                collision = p.createCollisionShape(
+                    p.GEOM_CYLINDER, radius=radius, height=height, physicsClientId=self.client
+                )
+                visual = p.createVisualShape(
+                    p.GEOM_CYLINDER, radius=radius, length=height, rgbaColor=[0.85, 0.2, 0.15, 1.0],
+                    physicsClientId=self.client,
+                )
+            elif shape == "box":
+                (half,) = dims
+                collision = p.createCollisionShape(
+                    p.GEOM_BOX, halfExtents=[half] * 3, physicsClientId=self.client
+                )
+                visual = p.createVisualShape(
+                    p.GEOM_BOX, halfExtents=[half] * 3, rgbaColor=[0.85, 0.2, 0.15, 1.0],
+                    physicsClientId=self.client,
+                )
+            else:
+                raise ValueError(f"object.shape must be 'cylinder' or 'box', got '{shape}'")
+            self.object_id = p.createMultiBody(mass, collision, visual, [0, 0, 1], physicsClientId=self.client)
+            self._object_shape = key
+        p.changeDynamics(
+            self.object_id, -1, mass=mass, lateralFriction=friction, spinningFriction=0.001,
+            rollingFriction=0.0001, physicsClientId=self.client,
+        )
+        return self.object_id
+
+    def place_object(self, position: Sequence[float], yaw: float = 0.0) -> None:
+        """Teleport the object to ``position`` (m, base_link) at rest, upright, with ``yaw`` (rad)."""
+        orientation = p.getQuaternionFromEuler([0.0, 0.0, yaw])
+        p.resetBasePositionAndOrientation(self.object_id, position, orientation, physicsClientId=self.client)
+        p.resetBaseVelocity(self.object_id, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+        # An object resting on the table costs a third of each physics step; let it sleep until
+        # something touches it (contacts wake it up).
+        p.changeDynamics(self.object_id, -1, activationState=p.ACTIVATION_STATE_ENABLE_SLEEPING,
+                         physicsClientId=self.client)
+        p.changeDynamics(self.object_id, -1, activationState=p.ACTIVATION_STATE_SLEEP,
+                         physicsClientId=self.client)
+
+    def object_pose(self) -> Tuple[np.ndarray, Tuple[float, ...]]:
+        """Object centre position (m) and quaternion (x, y, z, w) in base_link."""
+        position, orientation = p.getBasePositionAndOrientation(self.object_id, physicsClientId=self.client)
+        return np.array(position), orientation
+
+    # ------------------------------------------------------------------ physics
+    def step(self) -> None:
+        """Advance one control period (``substeps`` physics steps)."""
+        for _ in range(self.substeps):
+            p.stepSimulation(physicsClientId=self.client)
+
+    def contacts(self, body_a: int, body_b: int) -> list:
+        """Contact points between two bodies found by the last physics step."""
+        return p.getContactPoints(bodyA=body_a, bodyB=body_b, physicsClientId=self.client)
+
+    def render(self, width: int = 480, height: int = 360, target=(-0.45, 0.0, 0.15)) -> np.ndarray:
+        """RGB image (H, W, 3) uint8 from a fixed camera, headless TinyRenderer."""
+        view = p.computeViewMatrixFromYawPitchRoll(
+            cameraTargetPosition=target, distance=1.5, yaw=-60.0, pitch=-30.0, roll=0.0, upAxisIndex=2,
+            physicsClientId=self.client,
+        )
+        proj = p.computeProjectionMatrixFOV(fov=50.0, aspect=width / height, nearVal=0.05, farVal=5.0,
+                                            physicsClientId=self.client)
+        _, _, rgba, _, _ = p.getCameraImage(
+            width, height, view, proj, renderer=p.ER_TINY_RENDERER, physicsClientId=self.client
+        )
+        return np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4)[:, :, :3]
+
+    def close(self) -> None:
+        """Disconnect the client (safe to call twice)."""
+        if self.client is not None and self.client >= 0:
+            try:
+                p.disconnect(physicsClientId=self.client)
+            except p.error:
+                pass
+            self.client = -1

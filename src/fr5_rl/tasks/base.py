@@ -1,0 +1,113 @@
+"""What every task shares: the state it judges, its outcome, the shaped reward."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Dict, Mapping, Optional
+
+import numpy as np
+
+
+@dataclass
+class TaskState:
+    """Everything a task needs to judge one control step (base_link frame, SI units)."""
+
+    tcp_position: np.ndarray  # (3,) m
+    tcp_rotation: np.ndarray  # (3, 3)
+    gripper_width: float  # m, measured opening
+    tcp_to_object_distance: float  # m, tcp to object centre
+    object_position: np.ndarray  # (3,) m, centre
+    object_up_axis: np.ndarray  # (3,) object's own z axis in base_link
+    object_start_position: np.ndarray  # (3,) m, where it was placed at reset
+    robot_table_contact: bool  # any robot link touches the table
+    arm_object_contact: bool  # a robot link other than the finger pads touches the object
+    fingers_object_contact: int  # how many finger pads touch the object (0, 1, 2)
+    tcp_in_workspace: bool
+
+
+@dataclass
+class TaskOutcome:
+    """A task's verdict on one step."""
+
+    success: bool
+    failure: Optional[str]  # None, or why the episode failed
+    terms: Dict[str, float] = field(default_factory=dict)  # shaping terms, unweighted
+
+
+def approach_angle(tcp_rotation: np.ndarray) -> float:
+    """Angle (rad) between the tcp z axis (approach direction) and straight down (-z)."""
+    return float(np.arccos(np.clip(-tcp_rotation[2, 2], -1.0, 1.0)))
+
+
+class Task:
+    """Base class: placement sampling, shaping terms, success and failure tests.
+
+    Subclasses implement :meth:`terms`, :meth:`judge` and may extend :meth:`reset`.
+    """
+
+    name = "task"
+    include_lift = False
+
+    def __init__(self, cfg: Mapping[str, Any], max_opening_width: float) -> None:
+        self.cfg = cfg
+        self.task_cfg = cfg[self.name]
+        self.max_steps = int(self.task_cfg["max_steps"])
+        self.max_opening_width = max_opening_width
+        reward = cfg["reward"]
+        self.weights = dict(reward["weights"])
+        self.distance_scale = float(reward["distance_scale"])
+        self.potential_gain = float(reward["potential_gain"])
+        self.success_bonus = float(reward["success_bonus"])
+        self.collision_penalty = float(reward["collision_penalty"])
+        self.action_penalty = float(reward["action_penalty"])
+        self.sparse = reward["mode"] == "sparse"
+        self._previous_potential: Optional[float] = None
+
+    def reset(self) -> None:
+        """Start of an episode."""
+        self._previous_potential = None
+
+    def terms(self, state: TaskState) -> Dict[str, float]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def judge(self, state: TaskState, control_dt: float) -> TaskOutcome:  # pragma: no cover
+        raise NotImplementedError
+
+    def reward(self, outcome: TaskOutcome, action: np.ndarray) -> Dict[str, float]:
+        """Reward of one step, returned as its named parts (their sum is the reward).
+
+        Dense mode pays progress in the weighted shaping potential (potential-based shaping:
+        it cannot be farmed by dawdling or ended early by crashing), plus the success bonus,
+        minus the collision penalty and a small action-magnitude cost. Sparse mode pays only
+        the bonus and the penalty.
+        """
+        parts = {"success": self.success_bonus if outcome.success else 0.0}
+        parts["collision"] = -self.collision_penalty if outcome.failure == "collision" else 0.0
+        if self.sparse:
+            parts["progress"] = 0.0
+            parts["action"] = 0.0
+            return parts
+        potential = sum(self.weights[name] * value for name, value in outcome.terms.items())
+        previous = potential if self._previous_potential is None else self._previous_potential
+        self._previous_potential = potential
+        parts["progress"] = self.potential_gain * (potential - previous)
+        parts["action"] = -self.action_penalty * float(action @ action)
+        return parts
+
+    def prime(self, state: TaskState) -> None:
+        """Record the potential of the reset state, so the first step pays its own progress."""
+        terms = self.terms(state)
+        self._previous_potential = sum(self.weights[name] * value for name, value in terms.items())
+
+    # Shared shaping terms -------------------------------------------------------------
+    def approach_term(self, state: TaskState) -> float:
+        """-distance(tcp, object centre) / distance_scale."""
+        return -state.tcp_to_object_distance / self.distance_scale
+
+    @staticmethod
+    def orientation_term(state: TaskState) -> float:
+        """cos(angle between tcp z and straight down): 1 pointing down, -1 pointing up."""
+        return float(-state.tcp_rotation[2, 2])
+
+    def gripper_term(self, state: TaskState, wanted_width: float) -> float:
+        """-|measured width - wanted width| / max opening width."""
+        return -abs(state.gripper_width - wanted_width) / self.max_opening_width

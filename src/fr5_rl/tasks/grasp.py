@@ -1,0 +1,68 @@
+"""FR5Grasp: reach, close the fingers on the object, lift it and hold it up."""
+from __future__ import annotations
+
+from typing import Dict
+
+import numpy as np
+
+from .base import Task, TaskOutcome, TaskState
+
+
+class GraspTask(Task):
+    """Success: the object's centre stays at least ``lift_height`` above its start for
+    ``hold_time`` seconds. Failure: any robot contact with the table, the arm or palm hitting
+    the object, the object knocked over (tilt past ``knocked_over_angle_deg``) or pushed off
+    the table region, the tcp leaving the workspace; the step limit truncates.
+    """
+
+    name = "grasp"
+    include_lift = True
+
+    def __init__(self, cfg, max_opening_width: float) -> None:
+        super().__init__(cfg, max_opening_width)
+        self.lift_height = float(self.task_cfg["lift_height"])
+        self.hold_time = float(self.task_cfg["hold_time"])
+        self.max_tilt_cos = float(np.cos(np.deg2rad(float(self.task_cfg["knocked_over_angle_deg"]))))
+        obj = cfg["object"]
+        self.region_low = np.asarray(obj["region_low"], dtype=np.float64) - 0.1
+        self.region_high = np.asarray(obj["region_high"], dtype=np.float64) + 0.1
+        # Close when the tcp is this close to the object centre (m): the shaping's cue.
+        self.close_distance = 0.02
+        self.lifted_time = 0.0
+
+    def reset(self) -> None:
+        super().reset()
+        self.lifted_time = 0.0
+
+    def lift(self, state: TaskState) -> float:
+        """Height (m) of the object centre above where it was placed."""
+        return float(state.object_position[2] - state.object_start_position[2])
+
+    def terms(self, state: TaskState) -> Dict[str, float]:
+        near = state.tcp_to_object_distance < self.close_distance
+        wanted_width = 0.0 if near else self.max_opening_width
+        held = state.fingers_object_contact == 2
+        return {
+            "approach": self.approach_term(state),
+            "orientation": self.orientation_term(state),
+            "gripper": self.gripper_term(state, wanted_width),
+            "lift": min(max(self.lift(state), 0.0) / self.lift_height, 1.0) if held else 0.0,
+        }
+
+    def judge(self, state: TaskState, control_dt: float) -> TaskOutcome:
+        terms = self.terms(state)
+        if state.robot_table_contact or state.arm_object_contact:
+            return TaskOutcome(False, "collision", terms)
+        if not state.tcp_in_workspace:
+            return TaskOutcome(False, "left_workspace", terms)
+        if float(state.object_up_axis[2]) < self.max_tilt_cos:
+            return TaskOutcome(False, "object_knocked_over", terms)
+        xy = state.object_position[:2]
+        if np.any(xy < self.region_low) or np.any(xy > self.region_high):
+            return TaskOutcome(False, "object_out_of_reach", terms)
+        if self.lift(state) >= self.lift_height:
+            self.lifted_time += control_dt
+        else:
+            self.lifted_time = 0.0
+        success = self.lifted_time >= self.hold_time - 1e-9
+        return TaskOutcome(success, None, terms)

@@ -1,0 +1,44 @@
+"""FR5Reach: bring the open gripper around the object, pointing down, touching nothing."""
+from __future__ import annotations
+
+from typing import Dict
+
+import numpy as np
+
+from .base import Task, TaskOutcome, TaskState
+
+
+class ReachTask(Task):
+    """Success: tcp within ``success_distance`` of the object centre, approach axis within
+    ``max_approach_angle_deg`` of straight down, fingers open, and no robot link other than the
+    finger pads touching anything. Failure: a collision of the arm or palm with the table or
+    the object, the tcp leaving the workspace; the step limit truncates.
+    """
+
+    name = "reach"
+
+    def __init__(self, cfg, max_opening_width: float) -> None:
+        super().__init__(cfg, max_opening_width)
+        self.success_distance = float(self.task_cfg["success_distance"])
+        self.min_down_cosine = float(np.cos(np.deg2rad(float(self.task_cfg["max_approach_angle_deg"]))))
+        self.min_open_width = float(self.task_cfg["min_open_width"])
+
+    def terms(self, state: TaskState) -> Dict[str, float]:
+        return {
+            "approach": self.approach_term(state),
+            "orientation": self.orientation_term(state),
+            "gripper": self.gripper_term(state, self.max_opening_width),
+        }
+
+    def judge(self, state: TaskState, control_dt: float) -> TaskOutcome:
+        terms = self.terms(state)
+        if state.robot_table_contact or state.arm_object_contact:
+            return TaskOutcome(False, "collision", terms)
+        if not state.tcp_in_workspace:
+            return TaskOutcome(False, "left_workspace", terms)
+        success = (
+            state.tcp_to_object_distance <= self.success_distance
+            and -state.tcp_rotation[2, 2] >= self.min_down_cosine  # approach angle within limit
+            and state.gripper_width >= self.min_open_width
+        )
+        return TaskOutcome(success, None, terms)

@@ -1,0 +1,307 @@
+"""``rosrun fr5_rl train.py``: train an FR5 policy with Stable-Baselines3.
+
+Examples::
+
+    rosrun fr5_rl train.py --task reach                   # PPO, config/ppo_reach.yaml
+    rosrun fr5_rl train.py --task grasp --algo tqc --n-envs 2 --timesteps 300000
+    rosrun fr5_rl train.py --resume --run-dir runs/reach_ppo_20261122-1300
+
+A run directory holds ``config.json`` (everything needed to resume), ``checkpoints/latest``
+(model + normalisation stats, replaced atomically every ``--checkpoint-freq`` steps),
+``best/`` (best evaluation so far), ``final/``, TensorBoard logs in ``tb/``, evaluation curves
+in ``eval/evaluations.npz`` and ``summary.json`` (steps, wall time, time to solve, machine).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+import numpy as np
+
+from ..config import ConfigError, package_root
+from .algorithms import algorithm_class, check_hyperparameters, load_hyperparameters
+from .artifacts import STATS_FILE, MODEL_FILE, save_model_dir, write_json_atomic
+
+REPLAY_FILE = "replay_buffer.pkl"
+EVAL_SEED_OFFSET = 10_000  # evaluation seeds never overlap training seeds
+
+
+def machine_description() -> Dict[str, Any]:
+    """What the figures were measured on."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", "r", encoding="utf-8") as stream:
+            for line in stream:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
+            "platform": platform.platform()}
+
+
+def make_env_factory(task: str, env_overrides: Dict[str, Any], seed: int, rank: int,
+                     monitor_dir: Optional[Path]):
+    """A picklable constructor for one (Monitor-wrapped) environment of a vectorised set."""
+
+    def _init():
+        import fr5_rl  # noqa: F401  (registers the environments in the worker)
+        from stable_baselines3.common.monitor import Monitor
+
+        from ..envs import FR5Env
+
+        env = FR5Env(task=task, config=env_overrides)
+        filename = str(monitor_dir / f"env{rank}") if monitor_dir is not None else None
+        env = Monitor(env, filename=filename, info_keywords=("is_success", "failure"),
+                      override_existing=False)
+        env.reset(seed=seed + rank)
+        env.action_space.seed(seed + rank)
+        return env
+
+    return _init
+
+
+def make_vec_env(task: str, env_overrides: Dict[str, Any], n_envs: int, seed: int,
+                 monitor_dir: Optional[Path], subprocess: bool):
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    factories = [make_env_factory(task, env_overrides, seed, rank, monitor_dir) for rank in range(n_envs)]
+    if subprocess and n_envs > 1:
+        return SubprocVecEnv(factories, start_method="forkserver")
+    return DummyVecEnv(factories)
+
+
+def build_callbacks(args, run_dir: Path, eval_env, meta: Dict[str, Any], t_start: float,
+                    summary: Dict[str, Any]):
+    """Checkpointing, evaluation (best model with stats), reward-term logging, time-to-solve."""
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
+
+    class AtomicCheckpoint(BaseCallback):
+        """Every ``freq`` steps: model + stats (+ replay buffer) replace checkpoints/latest."""
+
+        def __init__(self, freq: int) -> None:
+            super().__init__()
+            self.freq = max(int(freq), 1)
+            self._next = None
+
+        def _on_training_start(self) -> None:
+            self._next = (self.num_timesteps // self.freq + 1) * self.freq
+
+        def _on_step(self) -> bool:
+            if self.num_timesteps >= self._next:
+                save_checkpoint(self.model, run_dir, meta)
+                self._next += self.freq
+            return True
+
+    class RewardTermLogger(BaseCallback):
+        """Per-episode sums of every reward part and failure causes, into TensorBoard."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self._running: List[Dict[str, float]] = []
+            self._finished: Dict[str, List[float]] = defaultdict(list)
+            self._failures: Dict[str, int] = defaultdict(int)
+            self._episodes = 0
+
+        def _on_step(self) -> bool:
+            infos, dones = self.locals["infos"], self.locals["dones"]
+            if not self._running:
+                self._running = [defaultdict(float) for _ in infos]
+            for index, (info, done) in enumerate(zip(infos, dones)):
+                for key, value in info.items():
+                    if key.startswith("reward_"):
+                        self._running[index][key] += float(value)
+                if done:
+                    for key, value in self._running[index].items():
+                        self._finished[key].append(value)
+                    self._running[index] = defaultdict(float)
+                    self._episodes += 1
+                    failure = info.get("failure")
+                    if failure:
+                        self._failures[failure] += 1
+            return True
+
+        def _on_rollout_end(self) -> None:
+            for key, values in self._finished.items():
+                self.logger.record(f"reward_terms/{key[len('reward_'):]}", float(np.mean(values)))
+            if self._episodes:
+                for cause, count in self._failures.items():
+                    self.logger.record(f"failures/{cause}", count / self._episodes)
+            self._finished.clear()
+            self._failures.clear()
+            self._episodes = 0
+
+    class SaveBest(BaseCallback):
+        def _on_step(self) -> bool:
+            save_model_dir(run_dir / "best", self.model, self.model.get_vec_normalize_env(),
+                           {**meta, "num_timesteps": int(self.model.num_timesteps)})
+            return True
+
+    class SolveTimer(BaseCallback):
+        """Records when the evaluation success rate first reaches the target; may stop there."""
+
+        def _on_step(self) -> bool:
+            evaluator = self.parent
+            rate = float(np.mean(evaluator._is_success_buffer)) if evaluator._is_success_buffer else 0.0
+            summary.setdefault("eval_history", []).append(
+                {"timesteps": int(self.num_timesteps), "wall_s": round(time.time() - t_start, 1),
+                 "success_rate": rate})
+            if rate >= args.target_success and "time_to_solve_s" not in summary:
+                summary["time_to_solve_s"] = round(time.time() - t_start, 1)
+                summary["timesteps_to_solve"] = int(self.num_timesteps)
+                save_model_dir(run_dir / "solved", self.model, self.model.get_vec_normalize_env(),
+                               {**meta, "num_timesteps": int(self.num_timesteps)})
+            write_json_atomic(run_dir / "summary.json", summary)
+            return not (args.stop_at_success and "time_to_solve_s" in summary)
+
+    eval_every = max(args.eval_freq // args.n_envs, 1)
+    evaluation = EvalCallback(
+        eval_env, n_eval_episodes=args.eval_episodes, eval_freq=eval_every, deterministic=True,
+        log_path=str(run_dir / "eval"), best_model_save_path=None, callback_on_new_best=SaveBest(),
+        callback_after_eval=SolveTimer(), verbose=0,
+    )
+    return CallbackList([AtomicCheckpoint(args.checkpoint_freq), RewardTermLogger(), evaluation])
+
+
+def save_checkpoint(model, run_dir: Path, meta: Dict[str, Any]) -> None:
+    """Model + normalisation stats (+ replay buffer for off-policy) as checkpoints/latest."""
+    directory = save_model_dir(run_dir / "checkpoints" / "latest", model, model.get_vec_normalize_env(),
+                               {**meta, "num_timesteps": int(model.num_timesteps)})
+    if getattr(model, "replay_buffer", None) is not None:
+        tmp = directory / "replay_buffer.tmp.pkl"
+        model.save_replay_buffer(tmp)
+        os.replace(tmp, directory / REPLAY_FILE)
+
+
+def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--task", choices=["reach", "grasp"], default="reach")
+    parser.add_argument("--algo", choices=["ppo", "sac", "td3", "tqc"], default="ppo")
+    parser.add_argument("--hyperparams", default=None,
+                        help="hyperparameter YAML (default: config/<algo>_<task>.yaml)")
+    parser.add_argument("--n-envs", type=int, default=None,
+                        help="parallel environments (default: the config's, else one per core)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--timesteps", type=int, default=None, help="default: the config's n_timesteps")
+    parser.add_argument("--run-dir", type=Path, default=None, help="default: runs/<task>_<algo>_<time>")
+    parser.add_argument("--resume", action="store_true", help="continue --run-dir from its last checkpoint")
+    parser.add_argument("--checkpoint-freq", type=int, default=20_000, help="steps between checkpoints")
+    parser.add_argument("--eval-freq", type=int, default=20_000, help="steps between evaluations")
+    parser.add_argument("--eval-episodes", type=int, default=40)
+    parser.add_argument("--target-success", type=float, default=0.95,
+                        help="evaluation success rate that counts as solved (time to solve)")
+    parser.add_argument("--stop-at-success", action="store_true", help="stop once solved")
+    parser.add_argument("--no-subprocess", action="store_true", help="DummyVecEnv instead of SubprocVecEnv")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--torch-threads", type=int, default=1)
+    return parser.parse_args(argv)
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    t_start = time.time()
+    args = parse_args(argv if argv is not None else [a for a in sys.argv[1:] if not a.startswith("__")])
+    try:
+        return train(args, t_start)
+    except ConfigError as error:
+        print(f"train.py: configuration error: {error}", file=sys.stderr)
+        return 2
+
+
+def train(args: argparse.Namespace, t_start: float) -> int:
+    import torch
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    torch.set_num_threads(max(args.torch_threads, 1))
+    if args.resume:
+        if args.run_dir is None or not (args.run_dir / "config.json").is_file():
+            raise ConfigError("--resume needs --run-dir pointing at an existing run (with config.json)")
+        saved = json.loads((args.run_dir / "config.json").read_text())
+        for key in ("task", "algo", "seed", "n_envs", "hyperparams_resolved", "timesteps"):
+            setattr(args, key, saved[key])
+        hyper = args.hyperparams_resolved
+    else:
+        hyper = load_hyperparameters(args.algo, args.task, args.hyperparams)
+        args.n_envs = args.n_envs or int(hyper.get("n_envs", os.cpu_count() or 1))
+        args.timesteps = int(args.timesteps or hyper["n_timesteps"])
+        if args.run_dir is None:
+            args.run_dir = Path("runs") / f"{args.task}_{args.algo}_{time.strftime('%Y%m%d-%H%M%S')}"
+    check_hyperparameters(args.algo, hyper, args.n_envs)
+    for warning in hyper.pop("_warnings", []):
+        print(f"train.py: warning: {warning}", file=sys.stderr)
+    run_dir: Path = args.run_dir
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "monitor").mkdir(exist_ok=True)
+
+    from ..envs import FR5Env  # after argument checks: imports pybullet
+
+    env_overrides = hyper["env"]
+    probe = FR5Env(task=args.task, config=env_overrides)
+    meta = {"task": args.task, "algo": args.algo, "env_overrides": env_overrides,
+            "observation_size": int(probe.observation_space.shape[0]),
+            "action_size": int(probe.action_space.shape[0]), "control_dt": probe.control_dt,
+            "seed": args.seed, "n_envs": args.n_envs}
+    probe.close()
+
+    venv = make_vec_env(args.task, env_overrides, args.n_envs, args.seed, run_dir / "monitor",
+                        not args.no_subprocess)
+    eval_env = make_vec_env(args.task, env_overrides, 1, args.seed + EVAL_SEED_OFFSET, None, False)
+    algo_cls = algorithm_class(args.algo)
+    latest = run_dir / "checkpoints" / "latest"
+    summary_path = run_dir / "summary.json"
+    summary: Dict[str, Any] = json.loads(summary_path.read_text()) if args.resume and summary_path.is_file() else {}
+    elapsed_before = float(summary.get("wall_time_s", 0.0))
+
+    if args.resume and (latest / MODEL_FILE).is_file():
+        venv = VecNormalize.load(str(latest / STATS_FILE), venv)
+        model = algo_cls.load(latest / MODEL_FILE, env=venv, device="cpu")
+        if (latest / REPLAY_FILE).is_file():
+            model.load_replay_buffer(latest / REPLAY_FILE)
+        print(f"train.py: resuming {run_dir} from step {model.num_timesteps}")
+    else:
+        if args.resume:
+            print(f"train.py: {run_dir} has no checkpoint yet; starting it from scratch")
+        norm = hyper["normalize"]
+        venv = VecNormalize(venv, norm_obs=bool(norm.get("norm_obs", True)),
+                            norm_reward=bool(norm.get("norm_reward", False)),
+                            clip_obs=float(norm.get("clip_obs", 10.0)), gamma=float(hyper["algo_kwargs"].get("gamma", 0.99)))
+        kwargs = dict(hyper["algo_kwargs"])
+        policy = kwargs.pop("policy", "MlpPolicy")
+        model = algo_cls(policy, venv, seed=args.seed, device="cpu", tensorboard_log=str(run_dir / "tb"),
+                         verbose=0, **kwargs)
+        write_json_atomic(run_dir / "config.json", {
+            "task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
+            "timesteps": args.timesteps, "hyperparams_resolved": hyper})
+    eval_env = VecNormalize(eval_env, training=False, norm_obs=venv.norm_obs, norm_reward=False,
+                            clip_obs=venv.clip_obs)
+    summary.update({"task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
+                    "machine": machine_description(), "target_success": args.target_success})
+    callbacks = build_callbacks(args, run_dir, eval_env, meta, t_start - elapsed_before, summary)
+    remaining = max(args.timesteps - int(model.num_timesteps), 0)
+    interrupted = False
+    try:
+        model.learn(total_timesteps=remaining, callback=callbacks, reset_num_timesteps=False,
+                    progress_bar=not args.no_progress, tb_log_name="run")
+    except KeyboardInterrupt:
+        interrupted = True
+        print("\ntrain.py: interrupted; saving a checkpoint before exiting", file=sys.stderr)
+    save_checkpoint(model, run_dir, meta)
+    if not interrupted:
+        save_model_dir(run_dir / "final", model, venv, {**meta, "num_timesteps": int(model.num_timesteps)})
+    summary.update({"num_timesteps": int(model.num_timesteps),
+                    "wall_time_s": round(elapsed_before + time.time() - t_start, 1),
+                    "finished": not interrupted})
+    write_json_atomic(summary_path, summary)
+    venv.close()
+    eval_env.close()
+    print(f"train.py: {'stopped' if interrupted else 'done'} at {model.num_timesteps} steps; "
+          f"run directory {run_dir}")
+    return 130 if interrupted else 0
