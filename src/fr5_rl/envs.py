@@ -163,9 +163,10 @@ class FR5Env(gym.Env):
             return hold
         return self._action_queue.popleft()
 
-    def _observe(self) -> Tuple[TaskState, np.ndarray]:
+    def task_state(self) -> TaskState:
+        """Ground-truth state the task judges (also used by the ROS simulator node)."""
         q, qd, width = self.robot.joint_state()
-        self._measured_joint_positions = q
+        self._measured = (q, qd, width)
         tcp_position, tcp_rotation = self.robot.tcp_pose_from_simulator()
         object_position, object_quaternion = self.world.object_pose()
         object_up = p.getMatrixFromQuaternion(object_quaternion)[2::3]
@@ -180,7 +181,7 @@ class FR5Env(gym.Env):
                     pads.add(contact[3])
                 else:
                     arm_object_contact = True
-        state = TaskState(
+        return TaskState(
             tcp_position=tcp_position, tcp_rotation=tcp_rotation, gripper_width=width,
             tcp_to_object_distance=float(np.sqrt(((object_position - tcp_position) ** 2).sum())),
             object_position=object_position, object_up_axis=object_up,
@@ -189,6 +190,12 @@ class FR5Env(gym.Env):
             tcp_in_workspace=bool((tcp_position >= self._workspace_low).all()
                                   and (tcp_position <= self._workspace_high).all()),
         )
+
+    def _observe(self) -> Tuple[TaskState, np.ndarray]:
+        state = self.task_state()
+        q, qd, width = self._measured
+        self._measured_joint_positions = q
+        tcp_position, tcp_rotation, object_position = state.tcp_position, state.tcp_rotation, state.object_position
         if self._obs_noise_std > 0.0:
             rng = self.np_random
             q = q + rng.normal(0.0, self._obs_noise_std, 6)
@@ -198,9 +205,14 @@ class FR5Env(gym.Env):
             joint_positions=q, joint_velocities=qd, gripper_width=width,
             gripper_command_width=self._gripper_command_width, tcp_position=tcp_position,
             tcp_rotation=tcp_rotation, object_position=object_position,
-            object_lift=float(object_position[2] - self._object_start[2]),
+            object_lift=float(object_position[2] - self.object_rest_z),
         )
         return state, self.observation_builder.build(inputs)
+
+    @property
+    def object_rest_z(self) -> float:
+        """z (m, base_link) of the object's centre when it stands on the table."""
+        return float(self.cfg["table"]["top_height"]) + self._object_rest_height
 
     def _apply_randomisation(self, rng: np.random.Generator) -> None:
         """Object size/mass/friction, joint damping, latency, observation noise (if enabled)."""

@@ -12,6 +12,7 @@ import numpy as np
 import pybullet as p
 
 from .envs import FR5Env
+from .transforms import quaternion_from_matrix
 
 
 class ScriptedExpert:
@@ -28,7 +29,7 @@ class ScriptedExpert:
         spec = self.env.robot_spec
         home_position, home_rotation = self.env.kinematics.tcp_pose(spec.home_joint_positions)
         # Keep the home pose's tcp yaw: only the approach axis matters to the tasks.
-        self._down_quaternion = _quaternion_from_matrix(home_rotation)
+        self._down_quaternion = list(quaternion_from_matrix(home_rotation))
         self._lower = spec.lower_limits.tolist() + [0.0, 0.0]
         self._upper = spec.upper_limits.tolist() + [spec.finger_travel] * 2
         self._ranges = [u - l for u, l in zip(self._upper, self._lower)]
@@ -95,22 +96,3 @@ class ScriptedExpert:
             physicsClientId=env.world.client,
         )
         return np.asarray(solution[:6])
-
-
-def _quaternion_from_matrix(rotation: np.ndarray) -> list:
-    """3x3 rotation -> (x, y, z, w) quaternion (robust branch selection)."""
-    m = rotation
-    trace = m[0, 0] + m[1, 1] + m[2, 2]
-    if trace > 0:
-        s = 2.0 * np.sqrt(trace + 1.0)
-        w, x, y, z = 0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        w, x, y, z = (m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        w, x, y, z = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s
-    else:
-        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        w, x, y, z = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s
-    return [float(x), float(y), float(z), float(w)]

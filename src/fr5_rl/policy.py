@@ -102,6 +102,34 @@ class OnnxPolicy(Policy):
         return np.asarray(action[0], dtype=np.float64)
 
 
+# Settings a trained policy depends on: change one and the observation or the action means
+# something else than during training.
+DEPLOYMENT_SETTINGS = (("simulation", "control_dt"), ("action",), ("observation",))
+
+
+def config_mismatches(meta: Dict[str, Any]) -> list:
+    """Differences between the configuration a model was trained with and the current one."""
+    from .config import load_env_config, load_yaml
+
+    differences = []
+    saved_env = meta.get("env_config")
+    if saved_env is not None:
+        current_env = load_env_config(meta.get("env_overrides", {}))
+        for path in DEPLOYMENT_SETTINGS:
+            saved, current = saved_env, current_env
+            for key in path:
+                saved, current = saved.get(key) if saved else None, current.get(key) if current else None
+            if saved != current:
+                differences.append(f"env {'.'.join(path)}: trained with {saved}, now {current}")
+    saved_robot = meta.get("robot_config")
+    if saved_robot is not None:
+        current_robot = load_yaml("robot")
+        for section in ("arm", "gripper", "home_joint_positions"):
+            if saved_robot.get(section) != current_robot.get(section):
+                differences.append(f"robot.yaml '{section}' differs from the one the model was trained with")
+    return differences
+
+
 def load_policy(model_dir: str | Path, backend: str = "torch", expected_task: Optional[str] = None,
                 expected_observation_size: Optional[int] = None) -> Policy:
     """Load a model directory for inference; raises ModelFilesError with a remedy on mismatch."""
@@ -113,6 +141,12 @@ def load_policy(model_dir: str | Path, backend: str = "torch", expected_task: Op
         raise ModelFilesError(
             f"{model_dir} expects {meta['observation_size']} observation values but this build makes "
             f"{expected_observation_size}: the model belongs to another version of fr5_rl; retrain it"
+        )
+    differences = config_mismatches(meta)
+    if differences:
+        raise ModelFilesError(
+            f"{model_dir} does not match the current configuration: " + "; ".join(differences)
+            + ". Restore those settings or retrain the model."
         )
     if backend == "torch":
         return TorchPolicy(model_dir, meta)

@@ -55,6 +55,7 @@ class Task:
         reward = cfg["reward"]
         self.weights = dict(reward["weights"])
         self.distance_scale = float(reward["distance_scale"])
+        self.orientation_scale = float(reward["orientation_scale"])
         self.potential_gain = float(reward["potential_gain"])
         self.success_bonus = float(reward["success_bonus"])
         self.collision_penalty = float(reward["collision_penalty"])
@@ -103,10 +104,13 @@ class Task:
         """-distance(tcp, object centre) / distance_scale."""
         return -state.tcp_to_object_distance / self.distance_scale
 
-    @staticmethod
-    def orientation_term(state: TaskState) -> float:
-        """cos(angle between tcp z and straight down): 1 pointing down, -1 pointing up."""
-        return float(-state.tcp_rotation[2, 2])
+    def orientation_term(self, state: TaskState) -> float:
+        """-(angle between tcp z and straight down) / orientation_scale.
+
+        Linear in the angle rather than the seed's cosine: a cosine is flat near zero tilt and
+        gives no push to correct the last 10-20 degrees, which is exactly what success needs.
+        """
+        return -float(np.arccos(min(max(-state.tcp_rotation[2, 2], -1.0), 1.0))) / self.orientation_scale
 
     def gripper_term(self, state: TaskState, wanted_width: float) -> float:
         """-|measured width - wanted width| / max opening width."""

@@ -25,7 +25,7 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from ..config import ConfigError, package_root
+from ..config import ConfigError, load_yaml
 from .algorithms import algorithm_class, check_hyperparameters, load_hyperparameters
 from .artifacts import STATS_FILE, MODEL_FILE, save_model_dir, write_json_atomic
 
@@ -246,6 +246,7 @@ def train(args: argparse.Namespace, t_start: float) -> int:
     env_overrides = hyper["env"]
     probe = FR5Env(task=args.task, config=env_overrides)
     meta = {"task": args.task, "algo": args.algo, "env_overrides": env_overrides,
+            "env_config": probe.cfg, "robot_config": load_yaml("robot"),
             "observation_size": int(probe.observation_space.shape[0]),
             "action_size": int(probe.action_space.shape[0]), "control_dt": probe.control_dt,
             "seed": args.seed, "n_envs": args.n_envs}

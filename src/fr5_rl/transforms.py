@@ -1,0 +1,80 @@
+"""Rigid transforms as 4x4 matrices, and the static transform table in config/ (no ROS needed)."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Dict, List, Tuple
+
+import numpy as np
+
+from .config import ConfigError, load_yaml
+from .kinematics import rotation_from_rpy
+
+
+def matrix_from_xyz_rpy(xyz, rpy) -> np.ndarray:
+    """4x4 homogeneous transform from a translation (m) and URDF roll-pitch-yaw (rad)."""
+    matrix = np.eye(4)
+    matrix[:3, :3] = rotation_from_rpy(*rpy)
+    matrix[:3, 3] = xyz
+    return matrix
+
+
+def quaternion_from_matrix(rotation: np.ndarray) -> Tuple[float, float, float, float]:
+    """3x3 rotation -> unit quaternion (x, y, z, w)."""
+    m = rotation
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0:
+        s = 2.0 * np.sqrt(trace + 1.0)
+        w, x, y, z = 0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        w, x, y, z = (m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        w, x, y, z = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s
+    else:
+        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        w, x, y, z = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s
+    q = np.array([x, y, z, w])
+    q /= np.linalg.norm(q)
+    return tuple(float(v) for v in q)
+
+
+def matrix_from_quaternion(xyz, quaternion) -> np.ndarray:
+    """4x4 transform from a translation (m) and a quaternion (x, y, z, w)."""
+    x, y, z, w = quaternion
+    matrix = np.eye(4)
+    matrix[:3, :3] = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ]
+    matrix[:3, 3] = xyz
+    return matrix
+
+
+def load_static_transforms(path: str | Path = "static_transforms") -> List[Dict]:
+    """Entries of ``config/static_transforms.yaml``: dicts with parent, child, matrix (4x4)."""
+    data = load_yaml(path)
+    entries = []
+    for index, item in enumerate(data.get("transforms", [])):
+        try:
+            parent, child = str(item["parent"]), str(item["child"])
+            xyz, rpy = [float(v) for v in item["xyz"]], [float(v) for v in item["rpy"]]
+        except (KeyError, TypeError, ValueError) as error:
+            raise ConfigError(f"static_transforms entry {index} needs parent, child, xyz[3], rpy[3]: {error}")
+        if len(xyz) != 3 or len(rpy) != 3 or not np.all(np.isfinite(xyz + rpy)):
+            raise ConfigError(f"static_transforms entry {index} ({parent} -> {child}): xyz and rpy need 3 finite values")
+        entries.append({"parent": parent, "child": child, "xyz": xyz, "rpy": rpy,
+                        "matrix": matrix_from_xyz_rpy(xyz, rpy)})
+    children = [e["child"] for e in entries]
+    if len(set(children)) != len(children):
+        raise ConfigError("static_transforms: a child frame appears twice (tf allows one parent per frame)")
+    return entries
+
+
+def transform_in(entries: List[Dict], parent: str, child: str) -> np.ndarray:
+    """The configured transform parent <- child (4x4), or ConfigError if it is not listed."""
+    for entry in entries:
+        if entry["parent"] == parent and entry["child"] == child:
+            return entry["matrix"]
+    raise ConfigError(f"config/static_transforms.yaml has no transform {parent} -> {child}")

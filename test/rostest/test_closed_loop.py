@@ -1,0 +1,52 @@
+#!/usr/bin/env python3
+"""rostest node: counts the simulator's episode outcomes and checks the success rate.
+
+Params: ~episodes (how many to watch), ~min_success_rate. Every command seen on the way must
+be a valid FR5 command (6 finite values inside the joint limits).
+"""
+import json
+import unittest
+
+import numpy as np
+import rospy
+import rostest
+from std_msgs.msg import Float64MultiArray, String
+
+from fr5_rl.config import load_robot_spec
+
+
+class TestClosedLoop(unittest.TestCase):
+    def test_success_rate(self):
+        episodes = int(rospy.get_param("~episodes", 10))
+        min_rate = float(rospy.get_param("~min_success_rate", 0.9))
+        spec = load_robot_spec()
+        outcomes, bad_commands, commands = [], [], [0]
+
+        def on_outcome(message):
+            outcomes.append(json.loads(message.data))
+
+        def on_command(message):
+            commands[0] += 1
+            values = np.asarray(message.data)
+            if values.shape != (6,) or not np.isfinite(values).all() or (values < spec.lower_limits).any() \
+                    or (values > spec.upper_limits).any():
+                bad_commands.append(list(message.data))
+
+        rospy.Subscriber("/fr5_sim/episode_outcome", String, on_outcome, queue_size=50)
+        rospy.Subscriber("/fr5/arm_controller/command", Float64MultiArray, on_command, queue_size=50)
+        deadline = rospy.get_time() + 220.0
+        while len(outcomes) < episodes and rospy.get_time() < deadline and not rospy.is_shutdown():
+            rospy.sleep(0.2)
+        watched = outcomes[:episodes]
+        self.assertEqual(len(watched), episodes, f"only {len(outcomes)} episodes finished in time")
+        successes = sum(o["success"] for o in watched)
+        rospy.loginfo(f"closed loop: {successes}/{episodes} successes: {watched}")
+        self.assertGreater(commands[0], 0, "the policy node never commanded the arm")
+        self.assertEqual(bad_commands, [], "invalid commands were published")
+        self.assertGreaterEqual(successes / episodes, min_rate,
+                                f"success {successes}/{episodes} below {min_rate:.0%}: {watched}")
+
+
+if __name__ == "__main__":
+    rospy.init_node("test_closed_loop")
+    rostest.rosrun("fr5_rl", "test_closed_loop", TestClosedLoop)

@@ -1,0 +1,156 @@
+#!/usr/bin/env python3
+"""rostest node: the policy node holds on every bad input and recovers by itself.
+
+This node plays the robot (``/joint_states`` at 100 Hz in a shuffled name order, with an extra
+joint the policy must ignore; the arm follows each command exactly) and the camera
+(``/target_pose`` in ``camera_link`` at 30 Hz). Phases alternate good inputs, where commands
+must flow at 50 Hz, with one fault each, where no command may be published and the node must
+warn with the right reason. Every command ever published must be a valid FR5 command.
+"""
+import random
+import threading
+import unittest
+
+import numpy as np
+import rospy
+import rostest
+from geometry_msgs.msg import PoseStamped
+from rosgraph_msgs.msg import Log
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool
+
+from fr5_rl.config import load_robot_spec
+from fr5_rl.transforms import load_static_transforms, transform_in
+
+SETTLE = 0.3  # s after a mode change before commands are counted (one control period in flight)
+
+
+class RobotAndCamera:
+    """Publishes joint states and target poses according to the current fault modes."""
+
+    def __init__(self, spec):
+        self.spec = spec
+        self.positions = spec.home_joint_positions.copy()
+        self.joint_mode = "good"
+        self.camera_mode = "good"
+        self.lock = threading.Lock()
+        self.commands = []  # (time, values, positions when received)
+        self.invalid = []
+        camera_in_base = transform_in(load_static_transforms(), "base_link", "camera_link")
+        target_in_base = np.array([-0.5, 0.05, 0.03, 1.0])
+        self.target_in_camera = (np.linalg.inv(camera_in_base) @ target_in_base)[:3]
+        self.joint_pub = rospy.Publisher("/joint_states", JointState, queue_size=10)
+        self.target_pub = rospy.Publisher("/target_pose", PoseStamped, queue_size=10)
+        rospy.Subscriber("/fr5/arm_controller/command", Float64MultiArray, self.on_command, queue_size=100)
+        rospy.Timer(rospy.Duration(0.01), self.publish_joints)
+        rospy.Timer(rospy.Duration(1.0 / 30.0), self.publish_target)
+
+    def on_command(self, message):
+        values = np.asarray(message.data, dtype=float)
+        with self.lock:
+            measured = self.positions.copy()
+            ok = (values.shape == (6,) and np.isfinite(values).all()
+                  and (values >= self.spec.lower_limits).all() and (values <= self.spec.upper_limits).all()
+                  and (np.abs(values - measured) <= self.spec.velocity_limits * 0.02 + 1e-6).all())
+            if not ok:
+                self.invalid.append(list(message.data))
+            else:
+                self.positions = values  # a perfectly tracking arm
+            self.commands.append(rospy.get_time())
+
+    def publish_joints(self, _event):
+        if self.joint_mode == "silent":
+            return
+        names = list(self.spec.joint_names) + list(self.spec.finger_joint_names) + ["conveyor_joint"]
+        with self.lock:
+            positions = list(self.positions) + [0.04, 0.04, 1.5]
+        order = list(range(len(names)))
+        random.shuffle(order)
+        message = JointState()
+        message.header.stamp = rospy.Time.now()
+        message.name = [names[i] for i in order]
+        message.position = [positions[i] for i in order]
+        message.velocity = [0.0] * len(names)
+        if self.joint_mode == "nan":
+            message.position[order.index(2)] = float("nan")
+        elif self.joint_mode == "short":
+            message.position = message.position[:5]
+        elif self.joint_mode == "unknown_names":
+            message.name = [f"joint{i + 1}" for i in range(len(names))]
+        self.joint_pub.publish(message)
+
+    def publish_target(self, _event):
+        if self.camera_mode == "silent":
+            return
+        message = PoseStamped()
+        message.header.stamp = rospy.Time.now()
+        message.header.frame_id = "unknown_camera" if self.camera_mode == "unknown_frame" else "camera_link"
+        x, y, z = self.target_in_camera
+        message.pose.position.x = float("nan") if self.camera_mode == "nan" else x
+        message.pose.position.y, message.pose.position.z = y, z
+        message.pose.orientation.w = 1.0
+        self.target_pub.publish(message)
+
+    def count_commands(self, start, end):
+        with self.lock:
+            return sum(start <= t <= end for t in self.commands)
+
+
+class TestPolicyNodeFaults(unittest.TestCase):
+    def test_holds_on_bad_inputs_and_recovers(self):
+        spec = load_robot_spec()
+        world = RobotAndCamera(spec)
+        warnings = []
+        rospy.Subscriber("/rosout", Log, lambda m: warnings.append((rospy.get_time(), m.msg))
+                         if m.name.endswith("fr5_policy") and m.level >= Log.WARN else None, queue_size=200)
+        enable = rospy.ServiceProxy("/fr5_policy/enable", SetBool)
+        enable.wait_for_service(timeout=30.0)
+
+        def phase(name, duration, joint_mode="good", camera_mode="good", settle=SETTLE):
+            world.joint_mode, world.camera_mode = joint_mode, camera_mode
+            start = rospy.get_time()
+            rospy.sleep(duration)
+            end = rospy.get_time()
+            count = world.count_commands(start + settle, end)
+            reasons = [text for t, text in warnings if t >= start]
+            return count, (end - start - settle), reasons
+
+        # Wait until the node runs with good inputs (model loading takes a few seconds).
+        deadline = rospy.get_time() + 40.0
+        while world.count_commands(0, 1e12) == 0 and rospy.get_time() < deadline:
+            rospy.sleep(0.1)
+        self.assertGreater(world.count_commands(0, 1e12), 0, "policy node never started commanding")
+
+        faults = [
+            ("nan joint position", dict(joint_mode="nan"), "NaN"),
+            ("positions shorter than names", dict(joint_mode="short"), "names but"),
+            ("unknown joint names", dict(joint_mode="unknown_names"), "lacks"),
+            ("target in an unknown frame", dict(camera_mode="unknown_frame"), "no transform"),
+            ("nan target", dict(camera_mode="nan"), "NaN"),
+            ("stale joint states", dict(joint_mode="silent"), "stale"),
+            ("stale target", dict(camera_mode="silent", settle=0.8), "stale"),
+        ]
+        for name, modes, reason in faults:
+            count, window, reasons = phase("good before " + name, 1.0)
+            self.assertGreaterEqual(count, 0.6 * 50 * window,
+                                    f"before '{name}': only {count} commands in {window:.2f} s ({reasons[-3:]})")
+            count, _, reasons = phase(name, 1.5, **modes)
+            self.assertEqual(count, 0, f"'{name}': {count} commands published while inputs were bad")
+            self.assertTrue(any(reason in text for text in reasons),
+                            f"'{name}': no warning mentioning '{reason}' (got {reasons[:3]})")
+        count, window, _ = phase("recovered", 1.0)
+        self.assertGreaterEqual(count, 0.6 * 50 * window, "the node did not recover after the last fault")
+
+        self.assertTrue(enable(False).success)
+        count, _, _ = phase("disabled", 1.0)
+        self.assertEqual(count, 0, "commands published while disabled")
+        self.assertTrue(enable(True).success)
+        count, window, _ = phase("re-enabled", 1.0)
+        self.assertGreaterEqual(count, 0.6 * 50 * window, "the node did not resume after ~enable true")
+        self.assertEqual(world.invalid, [], "invalid commands were published")
+
+
+if __name__ == "__main__":
+    rospy.init_node("test_policy_node_faults")
+    rostest.rosrun("fr5_rl", "test_policy_node_faults", TestPolicyNodeFaults)
