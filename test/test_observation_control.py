@@ -1,0 +1,305 @@
+"""Pure-logic unit tests of the code the simulator and the ROS policy node share.
+
+``fr5_rl.observation.ObservationBuilder`` (observation layout and normalisation) and
+``fr5_rl.control.JointCommandShaper`` (action -> safe joint targets). No simulator needed:
+the expected numbers are computed here from the layout documented in observation.py and
+control.py, so a change of index, scale or clamping shows up as a failure.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fr5_rl.config import load_env_config, load_robot_spec
+from fr5_rl.control import ACTION_SIZE, JointCommandShaper
+from fr5_rl.observation import (
+    GRASP_OBSERVATION_SIZE,
+    REACH_OBSERVATION_SIZE,
+    ObservationBuilder,
+    ObservationInputs,
+)
+
+SPEC = load_robot_spec()
+CFG = load_env_config()
+CONTROL_DT = float(CFG["simulation"]["control_dt"])
+MAX_WIDTH = SPEC.max_opening_width
+REL_SCALE = float(CFG["observation"]["relative_position_scale"])
+LIFT_SCALE = float(CFG["observation"]["lift_scale"])
+TCP_LOW = np.asarray(CFG["observation"]["tcp_position_low"], dtype=float)
+TCP_HIGH = np.asarray(CFG["observation"]["tcp_position_high"], dtype=float)
+DOWN = np.diag([1.0, -1.0, -1.0])  # tcp z axis pointing straight down
+
+
+def inputs(**changes) -> ObservationInputs:
+    """A neutral observation input: joints at mid-range, at rest, tcp at the box centre."""
+    base = dict(
+        joint_positions=(SPEC.lower_limits + SPEC.upper_limits) / 2.0,
+        joint_velocities=np.zeros(6),
+        gripper_width=MAX_WIDTH / 2.0,
+        gripper_command_width=MAX_WIDTH / 2.0,
+        tcp_position=(TCP_LOW + TCP_HIGH) / 2.0,
+        tcp_rotation=DOWN.copy(),
+        object_position=(TCP_LOW + TCP_HIGH) / 2.0,
+        object_lift=0.0,
+    )
+    base.update(changes)
+    return ObservationInputs(**base)
+
+
+@pytest.fixture
+def reach_builder():
+    return ObservationBuilder(SPEC, CFG["observation"], include_lift=False)
+
+
+@pytest.fixture
+def grasp_builder():
+    return ObservationBuilder(SPEC, CFG["observation"], include_lift=True)
+
+
+# ----------------------------------------------------------------------------- observation
+def test_sizes(reach_builder, grasp_builder):
+    assert reach_builder.size == REACH_OBSERVATION_SIZE == 23
+    assert grasp_builder.size == GRASP_OBSERVATION_SIZE == 24
+    assert reach_builder.build(inputs()).shape == (23,)
+    obs = grasp_builder.build(inputs())
+    assert obs.shape == (24,) and obs.dtype == np.float32
+
+
+def test_neutral_input_maps_to_zero_except_orientation(reach_builder):
+    obs = reach_builder.build(inputs())
+    expected = np.zeros(23)
+    expected[17:20] = DOWN[:, 2]  # approach axis (0, 0, -1)
+    np.testing.assert_allclose(obs, expected, atol=1e-6)
+
+
+@pytest.mark.parametrize("joint", range(6))
+def test_joint_limits_map_to_plus_minus_one(reach_builder, joint):
+    q = (SPEC.lower_limits + SPEC.upper_limits) / 2.0
+    q[joint] = SPEC.upper_limits[joint]
+    obs = reach_builder.build(inputs(joint_positions=q))
+    assert obs[joint] == pytest.approx(1.0, abs=1e-6)
+    others = [i for i in range(6) if i != joint]
+    np.testing.assert_allclose(obs[others], 0.0, atol=1e-6)
+    q[joint] = SPEC.lower_limits[joint]
+    assert reach_builder.build(inputs(joint_positions=q))[joint] == pytest.approx(-1.0, abs=1e-6)
+    # A quarter of the range above the lower limit maps to -0.5.
+    q[joint] = SPEC.lower_limits[joint] + 0.25 * (SPEC.upper_limits[joint] - SPEC.lower_limits[joint])
+    assert reach_builder.build(inputs(joint_positions=q))[joint] == pytest.approx(-0.5, abs=1e-6)
+
+
+def test_joint_velocities_scaled_by_velocity_limits(reach_builder):
+    qd = SPEC.velocity_limits * np.array([1.0, -1.0, 0.5, -0.5, 0.25, 0.0])
+    obs = reach_builder.build(inputs(joint_velocities=qd))
+    np.testing.assert_allclose(obs[6:12], [1.0, -1.0, 0.5, -0.5, 0.25, 0.0], atol=1e-6)
+    np.testing.assert_allclose(obs[0:6], 0.0, atol=1e-6)
+
+
+def test_gripper_widths(reach_builder):
+    obs = reach_builder.build(inputs(gripper_width=MAX_WIDTH, gripper_command_width=0.0))
+    assert obs[12] == pytest.approx(1.0) and obs[13] == pytest.approx(-1.0)
+    obs = reach_builder.build(inputs(gripper_width=0.0, gripper_command_width=MAX_WIDTH))
+    assert obs[12] == pytest.approx(-1.0) and obs[13] == pytest.approx(1.0)
+
+
+def test_tcp_position_box(reach_builder):
+    obs = reach_builder.build(inputs(tcp_position=TCP_HIGH.copy(), object_position=TCP_HIGH.copy()))
+    np.testing.assert_allclose(obs[14:17], 1.0, atol=1e-6)
+    obs = reach_builder.build(inputs(tcp_position=TCP_LOW.copy(), object_position=TCP_LOW.copy()))
+    np.testing.assert_allclose(obs[14:17], -1.0, atol=1e-6)
+
+
+def test_approach_axis_is_third_rotation_column(reach_builder):
+    angle = 0.3
+    c, s = np.cos(angle), np.sin(angle)
+    rotation = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]) @ DOWN
+    obs = reach_builder.build(inputs(tcp_rotation=rotation))
+    np.testing.assert_allclose(obs[17:20], rotation[:, 2], atol=1e-6)
+
+
+@pytest.mark.parametrize("axis", range(3))
+def test_object_offset_indices(reach_builder, axis):
+    tcp = np.array([-0.5, 0.1, 0.3])
+    for distance, expected in ((REL_SCALE, 1.0), (-REL_SCALE, -1.0), (REL_SCALE / 4, 0.25),
+                               (2.0 * REL_SCALE, 1.0)):  # beyond the scale: clamped
+        obj = tcp.copy()
+        obj[axis] += distance
+        obs = reach_builder.build(inputs(tcp_position=tcp, object_position=obj))
+        assert obs[20 + axis] == pytest.approx(expected, abs=1e-6), (axis, distance)
+        others = [20 + i for i in range(3) if i != axis]
+        np.testing.assert_allclose(obs[others], 0.0, atol=1e-6)
+
+
+def test_object_0_8m_beyond_tcp_is_plus_one(reach_builder):
+    tcp = np.array([-0.4, 0.0, 0.2])
+    obs = reach_builder.build(inputs(tcp_position=tcp, object_position=tcp + 0.8))
+    np.testing.assert_allclose(obs[20:23], 1.0, atol=1e-6)
+
+
+def test_lift_only_in_grasp(reach_builder, grasp_builder):
+    obs = grasp_builder.build(inputs(object_lift=LIFT_SCALE / 2.0))
+    assert obs[23] == pytest.approx(0.5)
+    assert grasp_builder.build(inputs(object_lift=LIFT_SCALE))[23] == pytest.approx(1.0)
+    assert grasp_builder.build(inputs(object_lift=10.0))[23] == pytest.approx(1.0)
+    np.testing.assert_allclose(reach_builder.build(inputs(object_lift=0.1)), obs[:23], atol=1e-6)
+
+
+def test_outputs_clamped_to_unit_box(grasp_builder):
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        obs = grasp_builder.build(inputs(
+            joint_positions=rng.uniform(-10, 10, 6), joint_velocities=rng.uniform(-50, 50, 6),
+            gripper_width=rng.uniform(-1, 1), gripper_command_width=rng.uniform(-1, 1),
+            tcp_position=rng.uniform(-5, 5, 3), object_position=rng.uniform(-5, 5, 3),
+            object_lift=rng.uniform(-2, 2)))
+        assert np.all(obs >= -1.0) and np.all(obs <= 1.0)
+        assert np.any(np.abs(obs) == 1.0)  # something was out of range and got clamped
+
+
+@pytest.mark.parametrize("field,value", [
+    ("joint_positions", np.array([0.0, np.nan, 0.0, 0.0, 0.0, 0.0])),
+    ("joint_velocities", np.array([np.inf, 0.0, 0.0, 0.0, 0.0, 0.0])),
+    ("gripper_width", float("nan")),
+    ("tcp_position", np.array([0.0, 0.0, np.nan])),
+    ("object_position", np.array([np.nan, 0.0, 0.0])),
+    ("object_lift", float("-inf")),
+])
+def test_non_finite_input_raises(grasp_builder, field, value):
+    with pytest.raises(ValueError):
+        grasp_builder.build(inputs(**{field: value}))
+
+
+def test_out_buffer_is_used(reach_builder):
+    out = np.full(23, 7.0, dtype=np.float32)
+    result = reach_builder.build(inputs(), out=out)
+    assert result is out and np.all(np.abs(out) <= 1.0)
+
+
+# ----------------------------------------------------------------------------- control
+def shaper(max_joint_step=None, alpha=None) -> JointCommandShaper:
+    cfg = dict(CFG["action"])
+    if max_joint_step is not None:
+        cfg["max_joint_step"] = max_joint_step
+    if alpha is not None:
+        cfg["smoothing_alpha"] = alpha
+    return JointCommandShaper(SPEC, cfg, CONTROL_DT)
+
+
+MID = (SPEC.lower_limits + SPEC.upper_limits) / 2.0
+
+
+def action(joint_values, gripper=0.0) -> np.ndarray:
+    a = np.zeros(ACTION_SIZE)
+    a[:6] = joint_values
+    a[6] = gripper
+    return a
+
+
+def test_first_step_is_alpha_times_max_step():
+    s = shaper(max_joint_step=0.04, alpha=0.7)
+    targets = s.arm_targets(action([1, -1, 0.5, 0, 0, 0]), MID)
+    np.testing.assert_allclose(targets - MID, 0.7 * 0.04 * np.array([1, -1, 0.5, 0, 0, 0]), atol=1e-12)
+
+
+def test_low_pass_filter_sequence_and_reset():
+    alpha, max_step = 0.7, 0.04
+    s = shaper(max_joint_step=max_step, alpha=alpha)
+    expected = np.zeros(6)
+    for k in range(12):
+        raw = max_step * np.array([1.0, -1.0, 0.0, 0.5, 1.0, -0.2])
+        expected = alpha * raw + (1 - alpha) * expected
+        step = s.arm_targets(action(raw / max_step), MID) - MID
+        np.testing.assert_allclose(step, expected, atol=1e-12, err_msg=f"step {k}")
+    # Converges to the unfiltered step.
+    np.testing.assert_allclose(step, raw, atol=max_step * (1 - alpha) ** 12 + 1e-12)
+    # A zero action decays geometrically rather than stopping at once.
+    decayed = s.arm_targets(action(np.zeros(6)), MID) - MID
+    np.testing.assert_allclose(decayed, (1 - alpha) * expected, atol=1e-12)
+    s.reset()
+    np.testing.assert_allclose(s.arm_targets(action(np.zeros(6)), MID), MID, atol=1e-12)
+
+
+def test_alpha_one_means_no_filter():
+    s = shaper(alpha=1.0)
+    max_step = float(CFG["action"]["max_joint_step"])
+    s.arm_targets(action(np.ones(6)), MID)
+    np.testing.assert_allclose(s.arm_targets(action(-np.ones(6)), MID) - MID, -max_step, atol=1e-12)
+
+
+def test_increments_apply_to_measured_position():
+    s = shaper(alpha=1.0)
+    max_step = float(CFG["action"]["max_joint_step"])
+    measured = MID + np.array([0.1, -0.2, 0.3, 0.0, 0.05, -0.05])
+    np.testing.assert_allclose(s.arm_targets(action(np.ones(6) * 0.5), measured),
+                               measured + 0.5 * max_step, atol=1e-12)
+
+
+def test_clamped_at_joint_limits():
+    s = shaper(alpha=1.0)
+    np.testing.assert_array_equal(s.arm_targets(action(np.ones(6)), SPEC.upper_limits), SPEC.upper_limits)
+    np.testing.assert_array_equal(s.arm_targets(action(-np.ones(6)), SPEC.lower_limits), SPEC.lower_limits)
+    near = SPEC.upper_limits - 0.001
+    np.testing.assert_array_equal(s.arm_targets(action(np.ones(6)), near), SPEC.upper_limits)
+    # Measured slightly past a limit (overshoot): the target comes back inside.
+    past = SPEC.upper_limits + 0.01
+    assert np.all(s.arm_targets(action(np.ones(6)), past) <= SPEC.upper_limits)
+
+
+def test_actions_beyond_one_are_clipped():
+    max_step = float(CFG["action"]["max_joint_step"])
+    a, b = shaper(alpha=1.0), shaper(alpha=1.0)
+    np.testing.assert_array_equal(a.arm_targets(action(10 * np.array([1, -1, 1, -1, 1, -1])), MID),
+                                  b.arm_targets(action(np.array([1, -1, 1, -1, 1, -1])), MID))
+    assert np.max(np.abs(a.arm_targets(action(np.full(6, 1e6)), MID) - MID)) <= max_step + 1e-12
+
+
+def test_rate_limit_even_if_max_step_too_large():
+    """The shaper itself caps the increment at velocity_limit * control_dt (defence in depth)."""
+    s = shaper(max_joint_step=1.0, alpha=1.0)
+    step = s.arm_targets(action(np.array([1, -1, 1, -1, 1, -1])), MID) - MID
+    np.testing.assert_allclose(np.abs(step), SPEC.velocity_limits * CONTROL_DT, atol=1e-12)
+
+
+def test_random_targets_respect_limits():
+    rng = np.random.default_rng(1)
+    s = shaper()
+    step_limit = SPEC.velocity_limits * CONTROL_DT
+    for _ in range(2000):
+        measured = rng.uniform(SPEC.lower_limits - 0.05, SPEC.upper_limits + 0.05)
+        targets = s.arm_targets(rng.uniform(-10, 10, ACTION_SIZE), measured)
+        assert np.all(targets >= SPEC.lower_limits) and np.all(targets <= SPEC.upper_limits)
+        inside = (measured >= SPEC.lower_limits) & (measured <= SPEC.upper_limits)
+        assert np.all(np.abs(targets - measured)[inside] <= step_limit[inside] + 1e-12)
+
+
+@pytest.mark.parametrize("bad", [
+    action([np.nan, 0, 0, 0, 0, 0]), action([0, 0, np.inf, 0, 0, 0]), action(np.zeros(6), np.nan)])
+def test_shaper_non_finite_action_raises(bad):
+    with pytest.raises(ValueError):
+        shaper().arm_targets(bad, MID)
+
+
+def test_shaper_non_finite_measurement_raises():
+    measured = MID.copy()
+    measured[3] = np.nan
+    with pytest.raises(ValueError):
+        shaper().arm_targets(action(np.zeros(6)), measured)
+
+
+@pytest.mark.parametrize("bad_action,bad_measured", [(np.zeros(6), MID), (np.zeros(8), MID),
+                                                     (np.zeros(7), MID[:5])])
+def test_shaper_wrong_shapes_raise(bad_action, bad_measured):
+    with pytest.raises(ValueError):
+        shaper().arm_targets(bad_action, bad_measured)
+
+
+def test_gripper_width_mapping():
+    s = shaper()
+    assert s.gripper_width(action(np.zeros(6), -1.0)) == pytest.approx(0.0)
+    assert s.gripper_width(action(np.zeros(6), 1.0)) == pytest.approx(MAX_WIDTH)
+    assert s.gripper_width(action(np.zeros(6), 0.0)) == pytest.approx(MAX_WIDTH / 2)
+    assert s.gripper_width(action(np.zeros(6), 10.0)) == pytest.approx(MAX_WIDTH)
+    assert s.gripper_width(action(np.zeros(6), -10.0)) == pytest.approx(0.0)
+    for width in np.linspace(0.0, MAX_WIDTH, 9):
+        assert s.gripper_width(action(np.zeros(6), s.gripper_action(width))) == pytest.approx(width)
+    with pytest.raises(ValueError):
+        s.gripper_width(action(np.zeros(6), np.nan))

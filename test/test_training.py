@@ -1,0 +1,450 @@
+"""Tests of training, checkpoints, resuming, evaluation, loading and ONNX export.
+
+Short runs only (seconds each): they check the plumbing (files written, resumability,
+interrupt handling, refusals, numerical parity), not learning quality.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fr5_rl.config import ConfigError, package_root
+from fr5_rl.training import evaluate, train
+from fr5_rl.training.algorithms import check_hyperparameters, load_hyperparameters
+from fr5_rl.training.artifacts import ModelFilesError
+
+REPO = Path(__file__).resolve().parent.parent
+TRAIN_SCRIPT = REPO / "scripts" / "train.py"
+# The same entry point as scripts/train.py, but passing main()'s return value to sys.exit.
+TRAIN_MODULE = ["-c", "import sys; from fr5_rl.training.train import main; sys.exit(main(sys.argv[1:]))"]
+
+FAST_PPO = """\
+n_timesteps: 20000
+n_envs: 2
+normalize: {norm_obs: true, norm_reward: false, clip_obs: 10.0}
+env: {}
+algo_kwargs:
+  policy: MlpPolicy
+  n_steps: 256
+  batch_size: 128
+  n_epochs: 2
+  learning_rate: 0.0003
+  gamma: 0.98
+  policy_kwargs:
+    net_arch: {pi: [32, 32], vf: [32, 32]}
+"""
+
+OFF_POLICY = """\
+n_timesteps: 600
+n_envs: 1
+normalize: {norm_obs: true, norm_reward: false, clip_obs: 10.0}
+env: {}
+algo_kwargs:
+  policy: MlpPolicy
+  learning_rate: 0.001
+  buffer_size: 2000
+  batch_size: 32
+  learning_starts: 100
+  gamma: 0.98
+  train_freq: 4
+  gradient_steps: 1
+  policy_kwargs: {net_arch: [32, 32]}
+"""
+
+
+def write(path: Path, text: str) -> Path:
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def read_json(path: Path) -> dict:
+    return json.loads(Path(path).read_text(encoding="utf-8"))
+
+
+def subprocess_env() -> dict:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = f"{REPO / 'src'}{os.pathsep}{env.get('PYTHONPATH', '')}"
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def start_training(command_prefix, run_dir: Path, hyperparams: Path, timesteps: int, extra=(),
+                   new_session=False) -> subprocess.Popen:
+    args = [sys.executable, *command_prefix, "--timesteps", str(timesteps), "--n-envs", "2",
+            "--hyperparams", str(hyperparams), "--checkpoint-freq", "1000", "--eval-freq", "1000000",
+            "--eval-episodes", "1", "--no-progress", "--run-dir", str(run_dir), *extra]
+    return subprocess.Popen(args, cwd=REPO, env=subprocess_env(), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=new_session)
+
+
+def wait_for_checkpoint(proc: subprocess.Popen, run_dir: Path, timeout: float = 45.0) -> int:
+    """Wait until checkpoints/latest is complete; returns its num_timesteps."""
+    meta = run_dir / "checkpoints" / "latest" / "meta.json"
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if meta.is_file():
+            try:
+                return int(read_json(meta)["num_timesteps"])
+            except (OSError, ValueError, KeyError):
+                pass  # being replaced right now
+        if proc.poll() is not None:
+            out, err = proc.communicate()
+            pytest.fail(f"training exited early with {proc.returncode}:\n{out}\n{err}")
+        time.sleep(0.05)
+    proc.kill()
+    out, err = proc.communicate()
+    pytest.fail(f"no checkpoint after {timeout} s:\n{out}\n{err}")
+
+
+def assert_model_dir(directory: Path, task="reach", algo="ppo") -> dict:
+    for name in ("model.zip", "vecnormalize.pkl", "meta.json"):
+        assert (directory / name).is_file() and (directory / name).stat().st_size > 0, name
+    meta = read_json(directory / "meta.json")
+    assert meta["task"] == task and meta["algo"] == algo
+    assert meta["observation_size"] == (23 if task == "reach" else 24) and meta["action_size"] == 7
+    return meta
+
+
+# ----------------------------------------------------------------------------- a short PPO run
+@pytest.fixture(scope="module")
+def ppo_run(tmp_path_factory) -> Path:
+    run_dir = tmp_path_factory.mktemp("ppo") / "run"
+    code = train.main(["--timesteps", "3000", "--n-envs", "2", "--no-subprocess", "--checkpoint-freq", "1000",
+                       "--eval-freq", "1000", "--eval-episodes", "2", "--no-progress", "--run-dir", str(run_dir)])
+    assert code == 0
+    return run_dir
+
+
+@pytest.fixture
+def model_copy(ppo_run, tmp_path) -> Path:
+    """A private copy of the run's checkpoint, free to be damaged by the test."""
+    target = tmp_path / "model"
+    shutil.copytree(ppo_run / "checkpoints" / "latest", target)
+    return target
+
+
+def test_short_ppo_run_writes_checkpoint(ppo_run):
+    latest = ppo_run / "checkpoints" / "latest"
+    meta = assert_model_dir(latest)
+    assert meta["num_timesteps"] >= 3000
+    assert meta["control_dt"] == 0.02
+    assert_model_dir(ppo_run / "final")
+    config = read_json(ppo_run / "config.json")
+    assert config["timesteps"] == 3000 and config["n_envs"] == 2 and config["algo"] == "ppo"
+    summary = read_json(ppo_run / "summary.json")
+    assert summary["finished"] is True and summary["num_timesteps"] == meta["num_timesteps"]
+    assert len(summary["eval_history"]) >= 2  # --eval-freq 1000 over 3000 steps
+    assert (ppo_run / "eval" / "evaluations.npz").is_file()
+    # no staging directories left behind
+    assert not [p.name for p in (ppo_run / "checkpoints").iterdir() if p.name.startswith(".")]
+    # The statistics are real running statistics, not the initial ones.
+    from fr5_rl.policy import load_normalizer
+
+    normalizer = load_normalizer(latest)
+    assert normalizer.obs_rms.count > 1000
+    assert np.any(np.abs(normalizer.obs_rms.mean) > 1e-3)
+
+
+def test_monitor_logs_episodes(ppo_run):
+    """SB3 Monitor files: a '#{json}' line, the CSV header, then one row per episode."""
+    files = sorted((ppo_run / "monitor").glob("*.monitor.csv"))
+    assert len(files) == 2  # one per environment
+    rows = []
+    for path in files:
+        lines = path.read_text(encoding="utf-8").splitlines()
+        assert lines and lines[0].startswith("#{"), f"{path.name} lacks the Monitor header: {lines[:2]}"
+        assert lines[1].split(",") == ["r", "l", "t", "is_success", "failure"]
+        rows += list(csv.DictReader(lines[1:]))
+    assert len(rows) >= 10
+    assert sum(int(row["l"]) for row in rows) <= 3072
+
+
+# ----------------------------------------------------------------------------- kill and resume
+def test_killed_run_resumes(tmp_path, capsys):
+    run_dir = tmp_path / "run"
+    hyper = write(tmp_path / "ppo_fast.yaml", FAST_PPO)
+    proc = start_training([str(TRAIN_SCRIPT)], run_dir, hyper, 20000, extra=["--no-subprocess"])
+    try:
+        wait_for_checkpoint(proc, run_dir)
+        time.sleep(0.3)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.communicate(timeout=30)
+    assert proc.returncode == -signal.SIGKILL
+    assert not (run_dir / "final").exists(), "the run finished before it could be killed"
+    killed_at = assert_model_dir(run_dir / "checkpoints" / "latest")["num_timesteps"]
+    assert 0 < killed_at < 20000
+    monitor_files = sorted((run_dir / "monitor").glob("*.monitor.csv"))
+    lines_before = [len(path.read_text().splitlines()) for path in monitor_files]
+
+    code = train.main(["--resume", "--run-dir", str(run_dir), "--no-subprocess", "--no-progress",
+                       "--checkpoint-freq", "5000", "--eval-freq", "1000000"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert f"resuming {run_dir} from step {killed_at}" in out
+    final = assert_model_dir(run_dir / "final")
+    assert final["num_timesteps"] >= 20000 >= killed_at
+    latest = assert_model_dir(run_dir / "checkpoints" / "latest")
+    assert latest["num_timesteps"] == final["num_timesteps"]
+    summary = read_json(run_dir / "summary.json")
+    assert summary["finished"] is True and summary["num_timesteps"] == final["num_timesteps"]
+    # the episode logs were appended to, not restarted (and no second header)
+    for path, before in zip(monitor_files, lines_before):
+        lines = path.read_text().splitlines()
+        assert len(lines) > before
+        assert sum(line.startswith("#") for line in lines) <= 1
+
+
+def test_resume_needs_existing_run(tmp_path, capsys):
+    assert train.main(["--resume", "--run-dir", str(tmp_path / "nothing"), "--no-progress"]) == 2
+    assert "--resume" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- Ctrl-C
+@pytest.mark.parametrize("entry", ["scripts/train.py", "train.main"])
+def test_sigint_saves_checkpoint_and_exits_130(tmp_path, entry):
+    run_dir = tmp_path / "run"
+    hyper = write(tmp_path / "ppo_fast.yaml", FAST_PPO)
+    prefix = [str(TRAIN_SCRIPT)] if entry == "scripts/train.py" else TRAIN_MODULE
+    proc = start_training(prefix, run_dir, hyper, 1_000_000, extra=["--no-subprocess"])
+    try:
+        before = wait_for_checkpoint(proc, run_dir)
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert "interrupted; saving a checkpoint" in err, err
+    after = assert_model_dir(run_dir / "checkpoints" / "latest")["num_timesteps"]
+    assert after >= before
+    summary = read_json(run_dir / "summary.json")
+    assert summary["finished"] is False and summary["num_timesteps"] == after
+    assert not (run_dir / "final").exists()
+    assert proc.returncode == 130, f"exit code {proc.returncode}\n{out}\n{err[-2000:]}"
+
+
+def test_ctrl_c_in_terminal_with_subprocess_envs(tmp_path):
+    """Ctrl-C in a terminal signals the whole process group: the SubprocVecEnv workers too."""
+    run_dir = tmp_path / "run"
+    hyper = write(tmp_path / "ppo_fast.yaml", FAST_PPO)
+    proc = start_training(TRAIN_MODULE, run_dir, hyper, 1_000_000, new_session=True)
+    try:
+        before = wait_for_checkpoint(proc, run_dir, timeout=55)
+        time.sleep(0.5)
+        os.killpg(proc.pid, signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    after = assert_model_dir(run_dir / "checkpoints" / "latest")["num_timesteps"]
+    assert after >= before
+    assert proc.returncode == 130, f"exit code {proc.returncode}\n{err[-3000:]}"
+
+
+# ----------------------------------------------------------------------------- configuration checks
+def test_ppo_divisibility_check(tmp_path, capsys):
+    hyper = write(tmp_path / "bad.yaml", FAST_PPO.replace("n_steps: 256", "n_steps: 100")
+                  .replace("batch_size: 128", "batch_size: 64"))
+    run_dir = tmp_path / "run"
+    code = train.main(["--hyperparams", str(hyper), "--n-envs", "2", "--timesteps", "1000",
+                       "--no-subprocess", "--no-progress", "--run-dir", str(run_dir)])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "batch_size=64" in err and "200" in err, err  # 100 steps * 2 envs
+    assert not run_dir.exists(), "the check must fire before any run directory or training"
+    # the same file with 4 environments (400 samples) is divisible by 64? no; by 80: yes
+    data = load_hyperparameters("ppo", "reach", str(hyper))
+    with pytest.raises(ConfigError, match="batch_size"):
+        check_hyperparameters("ppo", data, 4)
+    data["algo_kwargs"]["batch_size"] = 80
+    check_hyperparameters("ppo", data, 4)  # 400 % 80 == 0: accepted
+
+
+def test_shipped_hyperparameters_pass_their_checks():
+    shipped = [path.stem.split("_") for path in (package_root() / "config").glob("*_*.yaml")
+               if path.stem.split("_")[0] in ("ppo", "sac", "td3", "tqc")]
+    assert ["ppo", "reach"] in shipped
+    for algo, task in shipped:
+        hyper = load_hyperparameters(algo, task)
+        check_hyperparameters(algo, hyper, int(hyper.get("n_envs", 2)))
+        assert int(hyper["n_timesteps"]) > 0
+
+
+def test_off_policy_batch_larger_than_buffer_refused(tmp_path):
+    data = load_hyperparameters("sac", "reach", str(write(tmp_path / "sac.yaml", OFF_POLICY)))
+    data["algo_kwargs"]["batch_size"] = 5000
+    with pytest.raises(ConfigError, match="batch_size"):
+        check_hyperparameters("sac", data, 1)
+
+
+# ----------------------------------------------------------------------------- loading
+def test_missing_statistics_refused(model_copy):
+    from fr5_rl.policy import load_policy
+
+    (model_copy / "vecnormalize.pkl").unlink()
+    for backend in ("torch", "onnx"):
+        with pytest.raises(ModelFilesError, match="statistics"):
+            load_policy(model_copy, backend)
+
+
+def test_missing_directory_and_model_refused(model_copy, tmp_path):
+    from fr5_rl.policy import load_policy
+
+    with pytest.raises(ModelFilesError):
+        load_policy(tmp_path / "does_not_exist")
+    (model_copy / "model.zip").unlink()
+    with pytest.raises(ModelFilesError, match="model.zip"):
+        load_policy(model_copy)
+
+
+def test_observation_size_mismatch_refused(model_copy):
+    from fr5_rl.policy import load_policy
+
+    policy = load_policy(model_copy, "torch", expected_task="reach", expected_observation_size=23)
+    assert policy.act(np.zeros(23, dtype=np.float32)).shape == (7,)
+    with pytest.raises(ValueError):
+        policy.act(np.zeros(24, dtype=np.float32))
+    with pytest.raises(ValueError):
+        policy.act(np.full(23, np.nan, dtype=np.float32))
+    # this build makes 24 values (e.g. a grasp observation) but the model takes 23
+    with pytest.raises(ModelFilesError, match="observation"):
+        load_policy(model_copy, "torch", expected_observation_size=24)
+    with pytest.raises(ModelFilesError, match="grasp"):
+        load_policy(model_copy, "torch", expected_task="grasp")
+    # meta.json that disagrees with model.zip
+    meta = read_json(model_copy / "meta.json")
+    meta["observation_size"] = 24
+    (model_copy / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(ModelFilesError, match="observation"):
+        load_policy(model_copy, "torch")
+
+
+def test_onnx_backend_needs_export_and_checks_size(model_copy):
+    from fr5_rl.policy import load_policy
+    from fr5_rl.training.export_onnx import export
+
+    with pytest.raises(ModelFilesError, match="export_onnx"):
+        load_policy(model_copy, "onnx")
+    export(model_copy)
+    assert load_policy(model_copy, "onnx").act(np.zeros(23, dtype=np.float32)).shape == (7,)
+    meta = read_json(model_copy / "meta.json")
+    meta["observation_size"] = 24
+    (model_copy / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(ModelFilesError, match="observation"):
+        load_policy(model_copy, "onnx")
+
+
+# ----------------------------------------------------------------------------- evaluation
+def test_wilson_interval():
+    assert evaluate.wilson_interval(0, 0) == (0.0, 1.0)
+    low, high = evaluate.wilson_interval(5, 10)
+    assert (low, high) == pytest.approx((0.2366, 0.7634), abs=1e-4)
+    low, high = evaluate.wilson_interval(10, 10)
+    assert low == pytest.approx(0.7225, abs=1e-4) and high == pytest.approx(1.0, abs=1e-12)
+    low, high = evaluate.wilson_interval(0, 10)
+    assert low == pytest.approx(0.0, abs=1e-12) and high == pytest.approx(0.2775, abs=1e-4)
+    low, high = evaluate.wilson_interval(190, 200)
+    assert low == pytest.approx(0.9104, abs=1e-4) and high == pytest.approx(0.9726, abs=1e-4)
+
+
+def check_eval_outputs(out: Path, episodes: int) -> dict:
+    summary = read_json(out)
+    assert summary["episodes"] == episodes
+    successes = summary["successes"]
+    assert summary["success_rate"] == pytest.approx(successes / episodes)
+    low, high = evaluate.wilson_interval(successes, episodes)
+    assert summary["success_rate_95ci"] == pytest.approx([round(low, 4), round(high, 4)])
+    assert summary["success_rate_95ci"][0] <= summary["success_rate"] <= summary["success_rate_95ci"][1]
+    with open(out.with_suffix(".csv"), newline="", encoding="utf-8") as stream:
+        rows = list(csv.DictReader(stream))
+    assert len(rows) == episodes
+    assert sum(row["success"] == "True" for row in rows) == successes
+    seeds = [int(row["seed"]) for row in rows]
+    assert seeds == list(range(evaluate.HELD_OUT_SEED_START, evaluate.HELD_OUT_SEED_START + episodes))
+    assert summary["mean_episode_length"] == pytest.approx(np.mean([int(r["length"]) for r in rows]))
+    return summary
+
+
+def test_evaluate_trained_model(model_copy, tmp_path, capsys):
+    out = tmp_path / "eval" / "result.json"
+    assert evaluate.main([str(model_copy), "--episodes", "3", "--out", str(out)]) == 0
+    summary = check_eval_outputs(out, 3)
+    assert summary["task"] == "reach" and summary["algo"] == "ppo" and summary["backend"] == "torch"
+    assert summary["training_steps"] >= 3000
+    assert "95% CI" in capsys.readouterr().out
+
+
+def test_evaluate_expert_writes_json_and_csv(tmp_path):
+    out = tmp_path / "expert.json"
+    assert evaluate.main(["--expert", "reach", "--episodes", "5", "--out", str(out)]) == 0
+    summary = check_eval_outputs(out, 5)
+    assert summary["successes"] >= 4
+    assert summary["backend"] == "expert"
+
+
+def test_evaluate_refuses_incomplete_model(model_copy, tmp_path, capsys):
+    (model_copy / "vecnormalize.pkl").unlink()
+    assert evaluate.main([str(model_copy), "--episodes", "1", "--out", str(tmp_path / "e.json")]) == 2
+    assert "statistics" in capsys.readouterr().err
+    assert not (tmp_path / "e.json").exists()
+
+
+# ----------------------------------------------------------------------------- ONNX export
+def test_onnx_parity(model_copy):
+    from fr5_rl.training.export_onnx import export, parity
+
+    path = export(model_copy)
+    assert path == model_copy / "model.onnx" and path.stat().st_size > 0
+    worst = parity(model_copy, 1000)
+    assert worst <= 1e-5, worst
+
+
+def test_onnx_parity_detects_a_wrong_graph(model_copy):
+    """The parity check can fail: export, then change the statistics under the graph."""
+    import pickle
+
+    from fr5_rl.training.export_onnx import export, parity
+
+    export(model_copy)
+    with open(model_copy / "vecnormalize.pkl", "rb") as stream:
+        normalizer = pickle.load(stream)
+    normalizer.obs_rms.mean = normalizer.obs_rms.mean + 0.5
+    normalizer.class_attributes, normalizer.returns = {}, None  # dropped by VecNormalize's pickling
+    with open(model_copy / "vecnormalize.pkl", "wb") as stream:
+        pickle.dump(normalizer, stream)
+    assert parity(model_copy, 50) > 1e-3
+
+
+# ----------------------------------------------------------------------------- off-policy algorithms
+@pytest.mark.parametrize("algo", ["sac", "td3", "tqc"])
+def test_off_policy_short_run(algo, tmp_path):
+    from fr5_rl.training.export_onnx import export, parity
+
+    run_dir = tmp_path / "run"
+    hyper = write(tmp_path / f"{algo}.yaml", OFF_POLICY)
+    code = train.main(["--algo", algo, "--hyperparams", str(hyper), "--timesteps", "600", "--n-envs", "1",
+                       "--no-subprocess", "--checkpoint-freq", "300", "--eval-freq", "300",
+                       "--eval-episodes", "1", "--no-progress", "--run-dir", str(run_dir)])
+    assert code == 0
+    latest = run_dir / "checkpoints" / "latest"
+    meta = assert_model_dir(latest, algo=algo)
+    assert meta["num_timesteps"] >= 600
+    assert (latest / "replay_buffer.pkl").is_file()
+    assert_model_dir(run_dir / "final", algo=algo)
+    # the exported actor matches SB3 for this algorithm too
+    export(latest)
+    assert parity(latest, 200) <= 1e-5

@@ -1,0 +1,389 @@
+#!/usr/bin/env python3
+"""Benchmarks of fr5_rl: environment speed and policy inference latency (`make bench`).
+
+    python tools/bench.py            # full: 5000 steps x 3 repeats per task, 5000 inference calls
+    python tools/bench.py --quick    # smoke run: 1000 steps x 3 repeats, 1000 calls
+    python tools/bench.py --model runs/reach_ppo_x/final
+
+Environment speed, for FR5Reach-v0 and FR5Grasp-v0 in one process: random actions in
+[-1, 1] with a reset whenever an episode ends (resets are part of the timed loop, warm-up
+steps are not), median of the repeats:
+
+- env steps/s and the real-time factor (steps * control_dt / wall seconds);
+- overhead over bare PyBullet: the env's time per step divided by (substeps x the time of
+  one bare ``pybullet.stepSimulation``) of the same world, measured in the same process right
+  after each env repeat, starting from the state right after ``reset``.
+
+Inference latency of a model directory (default models/reach; skipped when absent): p50/p99
+of single-observation ``Policy.act`` calls through ``fr5_rl.policy.load_policy`` for the torch
+and onnx backends (the onnx graph is exported into a temporary copy when the directory has
+none). Observations come from rollouts in the model's own environment.
+
+Targets are printed as PASS/FAIL, never asserted. Results go to bench/results/env_speed.json,
+bench/results/inference.json and bench/results/summary.json (every JSON in bench/results
+merged). Only time.perf_counter is used for timing.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+if str(REPO / "src") not in sys.path:
+    sys.path.insert(0, str(REPO / "src"))
+
+RESULTS = REPO / "bench" / "results"
+TARGETS = {
+    "FR5Reach-v0": {"real_time_factor": 100.0},
+    "FR5Grasp-v0": {"real_time_factor": 50.0},
+    "overhead_max": 1.3,
+    "onnx_p99_ms_max": 0.2,
+}
+
+
+# ----------------------------------------------------------------------------- machine
+def machine_info() -> Dict[str, Any]:
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", "r", encoding="utf-8") as stream:
+            for line in stream:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    info: Dict[str, Any] = {
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "cores_usable": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+    }
+    if hasattr(os, "getloadavg"):
+        info["load_average_1min_at_start"] = round(os.getloadavg()[0], 2)
+    for module in ("numpy", "pybullet", "torch", "onnxruntime", "stable_baselines3"):
+        try:
+            from importlib.metadata import version
+
+            info[module] = version(module)
+        except Exception:  # pragma: no cover - informational only
+            pass
+    return info
+
+
+def verdict(ok: bool) -> str:
+    return "PASS" if ok else "FAIL"
+
+
+# ----------------------------------------------------------------------------- env speed
+def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0) -> Dict[str, Any]:
+    import pybullet as p
+
+    import fr5_rl  # noqa: F401  (registers the environments)
+    from fr5_rl.envs import FR5Env
+
+    task = {"FR5Reach-v0": "reach", "FR5Grasp-v0": "grasp"}[env_id]
+    env = FR5Env(task=task)
+    client, substeps = env.world.client, env.world.substeps
+    rng = np.random.default_rng(seed)
+    actions = rng.uniform(-1.0, 1.0, size=(steps + warmup, 7)).astype(np.float32)
+    perf = time.perf_counter
+
+    env_seconds: List[float] = []
+    bare_seconds: List[float] = []
+    physics_in_env: List[float] = []
+    episodes: List[int] = []
+    # Time spent in the world's physics stepping during env.step (diagnostic: the rest of the
+    # step is Python, observation and task code). Costs two perf_counter calls per step.
+    world_step = env.world.step
+    physics_clock = [0.0]
+
+    def timed_world_step() -> None:
+        t = time.perf_counter()
+        world_step()
+        physics_clock[0] += time.perf_counter() - t
+
+    env.world.step = timed_world_step
+    for repeat in range(repeats):
+        env.reset(seed=seed + 1000 * repeat)
+        for action in actions[:warmup]:  # warm-up, not timed
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                env.reset()
+        env.reset(seed=seed + 1000 * repeat + 1)
+        done_count = 0
+        physics_clock[0] = 0.0
+        step = env.step
+        reset = env.reset
+        t0 = perf()
+        for action in actions[warmup:]:
+            _, _, terminated, truncated, _ = step(action)
+            if terminated or truncated:
+                reset()
+                done_count += 1
+        env_seconds.append(perf() - t0)
+        physics_in_env.append(physics_clock[0])
+        episodes.append(done_count)
+
+        # Bare PyBullet: the same world, as it is right after reset, same number of substeps.
+        env.reset(seed=seed + 1000 * repeat + 1)
+        state = p.saveState(physicsClientId=client)
+        for _ in range(warmup * substeps):
+            p.stepSimulation(physicsClientId=client)
+        p.restoreState(stateId=state, physicsClientId=client)
+        step_simulation = p.stepSimulation
+        t0 = perf()
+        for _ in range(steps * substeps):
+            step_simulation(physicsClientId=client)
+        bare_seconds.append(perf() - t0)
+        p.removeState(state, physicsClientId=client)
+
+    control_dt = env.control_dt
+    env.close()
+    per_repeat = []
+    for env_s, bare_s, physics_s in zip(env_seconds, bare_seconds, physics_in_env):
+        per_repeat.append({
+            "physics_in_env_step_us": 1e6 * physics_s / steps,
+            "python_in_env_step_us": 1e6 * (env_s - physics_s) / steps,
+            "env_seconds": round(env_s, 4),
+            "steps_per_s": steps / env_s,
+            "real_time_factor": steps * control_dt / env_s,
+            "bare_seconds": round(bare_s, 4),
+            "bare_physics_step_us": 1e6 * bare_s / (steps * substeps),
+            "env_step_us": 1e6 * env_s / steps,
+            "overhead": (env_s / steps) / (substeps * bare_s / (steps * substeps)),
+        })
+
+    def median(key: str) -> float:
+        return float(statistics.median(r[key] for r in per_repeat))
+
+    rtf = median("real_time_factor")
+    overhead = median("overhead")
+    return {
+        "env_id": env_id,
+        "steps_per_repeat": steps,
+        "repeats": repeats,
+        "warmup_steps": warmup,
+        "control_dt": control_dt,
+        "substeps": substeps,
+        "episodes_per_repeat": episodes,
+        "steps_per_s": median("steps_per_s"),
+        "real_time_factor": rtf,
+        "env_step_us": median("env_step_us"),
+        "bare_physics_step_us": median("bare_physics_step_us"),
+        "overhead": overhead,
+        "physics_in_env_step_us": median("physics_in_env_step_us"),
+        "python_in_env_step_us": median("python_in_env_step_us"),
+        "per_repeat": per_repeat,
+        "targets": {
+            "real_time_factor_min": TARGETS[env_id]["real_time_factor"],
+            "real_time_factor": verdict(rtf >= TARGETS[env_id]["real_time_factor"]),
+            "overhead_max": TARGETS["overhead_max"],
+            "overhead": verdict(overhead <= TARGETS["overhead_max"]),
+        },
+    }
+
+
+# ----------------------------------------------------------------------------- inference
+def rollout_observations(task: str, env_overrides: Dict[str, Any], count: int, seed: int = 7) -> np.ndarray:
+    """``count`` raw observations from random-action rollouts of the model's environment."""
+    from fr5_rl.envs import FR5Env
+
+    env = FR5Env(task=task, config=env_overrides or None)
+    rng = np.random.default_rng(seed)
+    obs, _ = env.reset(seed=seed)
+    observations = []
+    while len(observations) < count:
+        observations.append(obs.copy())
+        obs, _, terminated, truncated, _ = env.step(rng.uniform(-1, 1, 7).astype(np.float32))
+        if terminated or truncated:
+            obs, _ = env.reset()
+    env.close()
+    return np.stack(observations)
+
+
+def time_calls(act, observations: np.ndarray, calls: int, warmup: int = 200) -> Dict[str, float]:
+    perf = time.perf_counter
+    n = len(observations)
+    for i in range(warmup):
+        act(observations[i % n])
+    samples = np.empty(calls)
+    for i in range(calls):
+        obs = observations[i % n]
+        t0 = perf()
+        act(obs)
+        samples[i] = perf() - t0
+    ms = samples * 1e3
+    return {"calls": calls, "p50_ms": float(np.percentile(ms, 50)), "p90_ms": float(np.percentile(ms, 90)),
+            "p99_ms": float(np.percentile(ms, 99)), "mean_ms": float(ms.mean()), "max_ms": float(ms.max())}
+
+
+def bench_inference(model_dir: Optional[Path], calls: int) -> Dict[str, Any]:
+    if model_dir is None or not model_dir.is_dir():
+        return {"skipped": True, "reason": f"no model directory at {model_dir}"}
+    from fr5_rl.policy import load_policy
+    from fr5_rl.training.artifacts import ONNX_FILE, ModelFilesError
+
+    result: Dict[str, Any] = {"model_dir": str(model_dir), "backends": {}}
+    work = model_dir
+    tmp = None
+    try:
+        torch_policy = load_policy(model_dir, "torch")
+    except ModelFilesError as error:
+        return {"skipped": True, "reason": str(error), "model_dir": str(model_dir)}
+    observations = rollout_observations(torch_policy.task, torch_policy.meta.get("env_overrides", {}),
+                                        min(calls, 2000))
+    result.update({"task": torch_policy.task, "algo": torch_policy.meta.get("algo"),
+                   "observation_size": torch_policy.observation_size})
+    result["backends"]["torch"] = time_calls(torch_policy.act, observations, calls)
+    try:
+        if not (model_dir / ONNX_FILE).is_file():
+            from fr5_rl.training.export_onnx import export
+
+            tmp = Path(tempfile.mkdtemp(prefix="fr5_bench_"))
+            work = tmp / model_dir.name
+            shutil.copytree(model_dir, work)
+            export(work)
+            result["onnx_exported_to_temporary_copy"] = True
+        onnx_policy = load_policy(work, "onnx")
+        result["backends"]["onnx"] = time_calls(onnx_policy.act, observations, calls)
+        worst = max(float(np.max(np.abs(torch_policy.act(o) - onnx_policy.act(o)))) for o in observations[:500])
+        result["onnx_max_abs_action_difference"] = worst
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+    p99 = result["backends"]["onnx"]["p99_ms"]
+    result["targets"] = {"onnx_p99_ms_max": TARGETS["onnx_p99_ms_max"],
+                         "onnx_p99": verdict(p99 <= TARGETS["onnx_p99_ms_max"])}
+    return result
+
+
+# ----------------------------------------------------------------------------- output
+def write_json(path: Path, data: Dict[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+    tmp.replace(path)
+
+
+def write_summary(results_dir: Path) -> Path:
+    merged: Dict[str, Any] = {}
+    for path in sorted(results_dir.glob("*.json")):
+        if path.name == "summary.json":
+            continue
+        try:
+            merged[path.stem] = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as error:
+            merged[path.stem] = {"unreadable": str(error)}
+    verdicts = {}
+    for name, data in merged.items():
+        stack = [(name, data)]
+        while stack:  # collect every PASS/FAIL, wherever it sits
+            prefix, node = stack.pop()
+            if isinstance(node, dict):
+                stack.extend((f"{prefix}.{k}", v) for k, v in node.items())
+            elif isinstance(node, list):
+                stack.extend((f"{prefix}[{i}]", v) for i, v in enumerate(node))
+            elif node in ("PASS", "FAIL"):
+                verdicts[prefix] = node
+    summary = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "verdicts": dict(sorted(verdicts.items())),
+               "results": merged}
+    path = results_dir / "summary.json"
+    write_json(path, summary)
+    return path
+
+
+def print_env_table(rows: List[Dict[str, Any]]) -> None:
+    header = (f"{'environment':<13} {'steps/s':>9} {'x real time':>12} {'target':>7}  "
+              f"{'env step':>9} {'bare step':>10} {'overhead':>9} {'target':>7}")
+    print(header)
+    print("-" * len(header))
+    for r in rows:
+        t = r["targets"]
+        print(f"{r['env_id']:<13} {r['steps_per_s']:>9.0f} {r['real_time_factor']:>11.1f}x "
+              f"{t['real_time_factor']:>7}  {r['env_step_us']:>7.0f}us {r['bare_physics_step_us']:>8.1f}us "
+              f"{r['overhead']:>8.2f}x {t['overhead']:>7}")
+    for r in rows:
+        print(f"{r['env_id']}: of {r['env_step_us']:.0f}us per env step, {r['physics_in_env_step_us']:.0f}us are "
+              f"physics (world.step, {r['substeps']} substeps of a moving arm) and "
+              f"{r['python_in_env_step_us']:.0f}us the rest (commands, state queries, observation, task)")
+    print(f"targets: reach >= {TARGETS['FR5Reach-v0']['real_time_factor']:.0f}x real time, grasp >= "
+          f"{TARGETS['FR5Grasp-v0']['real_time_factor']:.0f}x, overhead <= {TARGETS['overhead_max']}x "
+          f"(env step / (substeps x bare stepSimulation)); median of repeats")
+
+
+def print_inference_table(result: Dict[str, Any]) -> None:
+    if result.get("skipped"):
+        print(f"inference latency: skipped ({result['reason']})")
+        return
+    print(f"inference latency, {result['model_dir']} ({result['task']}, {result['algo']}), single observation:")
+    header = f"{'backend':<8} {'p50':>9} {'p90':>9} {'p99':>9} {'mean':>9} {'max':>9}  target"
+    print(header)
+    print("-" * len(header))
+    for backend, s in result["backends"].items():
+        target = result["targets"]["onnx_p99"] if backend == "onnx" else ""
+        print(f"{backend:<8} {s['p50_ms']:>7.3f}ms {s['p90_ms']:>7.3f}ms {s['p99_ms']:>7.3f}ms "
+              f"{s['mean_ms']:>7.3f}ms {s['max_ms']:>7.3f}ms  {target}")
+    print(f"target: onnx p99 <= {TARGETS['onnx_p99_ms_max']} ms; max |action torch - onnx| = "
+          f"{result.get('onnx_max_abs_action_difference', float('nan')):.1e}")
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="1000 steps per repeat, 1000 inference calls")
+    parser.add_argument("--steps", type=int, default=None, help="timed env steps per repeat (default 5000)")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--warmup", type=int, default=300, help="untimed env steps before each repeat")
+    parser.add_argument("--calls", type=int, default=None, help="inference calls per backend (default 5000)")
+    parser.add_argument("--model", type=Path, default=None, help="model directory (default models/reach)")
+    parser.add_argument("--skip-env", action="store_true")
+    parser.add_argument("--skip-inference", action="store_true")
+    parser.add_argument("--results", type=Path, default=RESULTS, help="output directory")
+    args = parser.parse_args(argv)
+    steps = args.steps or (1000 if args.quick else 5000)
+    calls = args.calls or (1000 if args.quick else 5000)
+
+    machine = machine_info()
+    print(f"machine: {machine['cpu']}, {machine['cores']} cores ({machine['cores_usable']} usable), "
+          f"load {machine.get('load_average_1min_at_start', '?')}; python {machine['python']}, "
+          f"pybullet {machine.get('pybullet', '?')}")
+    if not args.skip_env:
+        rows = [bench_env(env_id, steps, args.repeats, args.warmup) for env_id in ("FR5Reach-v0", "FR5Grasp-v0")]
+        print()
+        print_env_table(rows)
+        env_result = {"quick": args.quick, "machine": machine, "environments": {r["env_id"]: r for r in rows}}
+        if hasattr(os, "getloadavg"):
+            env_result["machine"] = dict(machine, load_average_1min_at_end=round(os.getloadavg()[0], 2))
+        write_json(args.results / "env_speed.json", env_result)
+    if not args.skip_inference:
+        model_dir = args.model or (REPO / "models" / "reach")
+        if args.model is None and not model_dir.is_dir():
+            print(f"\ninference latency: skipped, {model_dir} does not exist "
+                  "(train one or pass --model DIR)")
+            result: Dict[str, Any] = {"skipped": True, "reason": f"{model_dir} does not exist"}
+        else:
+            result = bench_inference(model_dir, calls)
+            print()
+            print_inference_table(result)
+        result.update({"quick": args.quick, "machine": machine})
+        write_json(args.results / "inference.json", result)
+    summary = write_summary(args.results)
+    written = [str(args.results / name) for name, skipped in (("env_speed.json", args.skip_env),
+                                                              ("inference.json", args.skip_inference)) if not skipped]
+    print(f"\nwrote {', '.join(written + [str(summary)])}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
