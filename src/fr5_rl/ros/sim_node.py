@@ -48,6 +48,7 @@ class SimulatorNode:
         self.physics_dt = self.env.world.physics_dt
         self.tick_dt = 1.0 / float(params["publish_rate"])
         self.substeps_per_tick = max(int(round(self.tick_dt / self.physics_dt)), 1)
+        self.tick_physics_time = self.substeps_per_tick * self.physics_dt
         self.ticks_per_control = max(int(round(self.env.control_dt / (self.substeps_per_tick * self.physics_dt))), 1)
         self.camera_in_base = transform_in(load_static_transforms(), self.spec.base_frame, str(params["camera_frame"]))
         self.base_in_camera = np.linalg.inv(self.camera_in_base)
@@ -204,7 +205,7 @@ class SimulatorNode:
                     if 0 < self.max_episodes <= self.episode:
                         break
                     self._start_episode()
-                self.env.robot.command(self.arm_target, self.gripper_target)
+                self.env.robot.command(self.arm_target, self.gripper_target, period=self.tick_physics_time)
                 for _ in range(self.substeps_per_tick):
                     p.stepSimulation(physicsClientId=client)
                 tick += 1

@@ -4,7 +4,7 @@ from __future__ import annotations
 import hashlib
 import tempfile
 from pathlib import Path
-from typing import Any, Dict, Mapping, Tuple
+from typing import Any, Dict, Mapping, Optional, Tuple
 
 import numpy as np
 import pybullet as p
@@ -65,10 +65,18 @@ class FR5Robot:
         self.finger_links = {index for index in self.finger_joints}
         n_arm = len(self.arm_joints)
         # One motor call for all eight joints: per-joint forces and gains in one list each.
-        self._forces = robot.effort_limits.tolist() + [robot.finger_effort] * 2
+        # Grip force (N) the simulated gripper squeezes with: the PGI-140-80 is set between
+        # 40 and 140 N; a 0.1 kg object needs little, and less force keeps contacts stable.
+        grip_force = min(float(sim_cfg["gripper_force"]), robot.finger_effort)
+        self._forces = robot.effort_limits.tolist() + [grip_force] * 2
         self._position_gains = [float(sim_cfg["arm_position_gain"])] * n_arm + [float(sim_cfg["finger_position_gain"])] * 2
         self._velocity_gains = [float(sim_cfg["arm_velocity_gain"])] * n_arm + [1.0, 1.0]
         self._finger_travel = robot.finger_travel
+        # The gripper moves its fingers at its rated speed: the target ramps at most this far
+        # per command (one control period).
+        self._finger_velocity = robot.finger_velocity
+        self._finger_step = robot.finger_velocity * float(sim_cfg["control_dt"])
+        self._finger_target = robot.finger_travel
         for index in self.finger_joints:
             p.changeDynamics(self.body, index, maxJointVelocity=robot.finger_velocity, physicsClientId=client)
         for index, velocity in zip(self.arm_joints, robot.velocity_limits):
@@ -82,11 +90,19 @@ class FR5Robot:
             p.resetJointState(self.body, index, float(angle), 0.0, physicsClientId=self.client)
         for index in self.finger_joints:
             p.resetJointState(self.body, index, finger, 0.0, physicsClientId=self.client)
+        self._finger_target = finger
         self.command(joint_positions, opening_width)
 
-    def command(self, joint_targets: np.ndarray, opening_width: float) -> None:
-        """Send position targets: arm (rad) and gripper opening width (m)."""
-        finger = min(max(opening_width / 2.0, 0.0), self._finger_travel)
+    def command(self, joint_targets: np.ndarray, opening_width: float, period: Optional[float] = None) -> None:
+        """Send position targets: arm (rad) and gripper opening width (m).
+
+        ``period`` (s) is how long this command stands before the next one (default: one
+        control period); the finger targets ramp at the gripper's rated speed over it.
+        """
+        wanted = min(max(opening_width / 2.0, 0.0), self._finger_travel)
+        limit = self._finger_step if period is None else self._finger_velocity * period
+        finger = self._finger_target + min(max(wanted - self._finger_target, -limit), limit)
+        self._finger_target = finger
         targets = list(joint_targets)
         targets += (finger, finger)
         p.setJointMotorControlArray(

@@ -4,6 +4,7 @@ Every call passes ``physicsClientId`` so several worlds coexist in one process.
 """
 from __future__ import annotations
 
+import os
 from typing import Any, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
@@ -14,6 +15,9 @@ class PyBulletWorld:
     """Owns one PyBullet client: physics settings, the table, the object, stepping."""
 
     def __init__(self, sim_cfg: Mapping[str, Any], gui: bool = False) -> None:
+        if gui and not os.environ.get("DISPLAY"):
+            # PyBullet's GUI would kill the whole process without a display.
+            raise RuntimeError("render_mode='human' needs an X display; use xvfb-run or render_mode='rgb_array'")
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         if self.client < 0:
             raise RuntimeError("PyBullet could not connect (is another GUI instance open?)")
@@ -31,6 +35,7 @@ class PyBulletWorld:
         self.table_id: Optional[int] = None
         self.object_id: Optional[int] = None
         self._object_shape: Optional[Tuple] = None
+        self._object_shapes: Optional[Tuple[int, int]] = None
 
     # ------------------------------------------------------------------ scene
     def add_table(self, table_cfg: Mapping[str, Any]) -> int:
@@ -52,14 +57,17 @@ class PyBulletWorld:
         return self.table_id
 
     def set_object(self, shape: str, dims: Tuple[float, ...], mass: float, friction: float) -> int:
-        """Create (or re-create when its size changed) the object; returns its body id.
+        """Create the object as a new body (at the start of every episode); returns its id.
 
-        ``dims`` is (radius, height) for a cylinder, (half_extent,) for a cube, in metres.
+        ``dims`` is (radius, height) for a cylinder, (half_extent,) for a cube, in metres. A new
+        body carries no contact cache or sleep history from the last episode, so
+        ``reset(seed=s)`` reproduces a rollout bit for bit. Shapes are reused while the size
+        stays the same.
         """
         key = (shape, tuple(round(d, 6) for d in dims))
-        if self.object_id is None or key != self._object_shape:
-            if self.object_id is not None:
-                p.removeBody(self.object_id, physicsClientId=self.client)
+        if self.object_id is not None:
+            p.removeBody(self.object_id, physicsClientId=self.client)
+        if key != self._object_shape:
             if shape == "cylinder":
                 radius, height = dims
                 collision = p.createCollisionShape(
@@ -80,8 +88,8 @@ class PyBulletWorld:
                 )
             else:
                 raise ValueError(f"object.shape must be 'cylinder' or 'box', got '{shape}'")
-            self.object_id = p.createMultiBody(mass, collision, visual, [0, 0, 1], physicsClientId=self.client)
-            self._object_shape = key
+            self._object_shapes, self._object_shape = (collision, visual), key
+        self.object_id = p.createMultiBody(mass, *self._object_shapes, [0, 0, 1], physicsClientId=self.client)
         p.changeDynamics(
             self.object_id, -1, mass=mass, lateralFriction=friction, spinningFriction=0.001,
             rollingFriction=0.0001, physicsClientId=self.client,

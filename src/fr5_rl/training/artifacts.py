@@ -15,7 +15,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Any, Dict
+from typing import Any, Callable, Dict, Optional
 
 MODEL_FILE = "model.zip"
 STATS_FILE = "vecnormalize.pkl"
@@ -38,8 +38,14 @@ def write_json_atomic(path: Path, data: Dict[str, Any]) -> None:
     os.replace(tmp, path)
 
 
-def save_model_dir(directory: Path, model, vec_normalize, meta: Dict[str, Any]) -> Path:
-    """Save model + statistics + meta together, atomically (write beside, then rename)."""
+def save_model_dir(directory: Path, model, vec_normalize, meta: Dict[str, Any],
+                   write_extra: Optional[Callable[[Path], None]] = None) -> Path:
+    """Save model + statistics + meta (+ whatever ``write_extra(staging_dir)`` writes) together.
+
+    Everything is written into a staging directory beside the target, which then replaces the
+    target by renames; the previous version stays as ``.<name>.old`` until the new one is in
+    place, and :func:`recover_model_dir` brings it back after a crash in between.
+    """
     directory = Path(directory)
     directory.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(dir=directory.parent, prefix=f".{directory.name}."))
@@ -47,6 +53,8 @@ def save_model_dir(directory: Path, model, vec_normalize, meta: Dict[str, Any]) 
         model.save(staging / MODEL_FILE)
         vec_normalize.save(str(staging / STATS_FILE))
         write_json_atomic(staging / META_FILE, meta)
+        if write_extra is not None:
+            write_extra(staging)
         if directory.exists():
             old = directory.with_name(f".{directory.name}.old")
             shutil.rmtree(old, ignore_errors=True)
@@ -59,6 +67,18 @@ def save_model_dir(directory: Path, model, vec_normalize, meta: Dict[str, Any]) 
         shutil.rmtree(staging, ignore_errors=True)
         raise
     return directory
+
+
+def recover_model_dir(directory: Path) -> bool:
+    """If a crash fell between the two renames of :func:`save_model_dir`, restore the previous
+    version. Returns True when ``directory`` holds a model afterwards."""
+    directory = Path(directory)
+    old = directory.with_name(f".{directory.name}.old")
+    if not (directory / MODEL_FILE).is_file() and (old / MODEL_FILE).is_file():
+        if directory.exists():
+            shutil.rmtree(directory)
+        os.replace(old, directory)
+    return (directory / MODEL_FILE).is_file()
 
 
 def read_meta(directory: Path) -> Dict[str, Any]:

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..config import ConfigError, load_yaml
 from .algorithms import algorithm_class, check_hyperparameters, load_hyperparameters
-from .artifacts import STATS_FILE, MODEL_FILE, save_model_dir, write_json_atomic
+from .artifacts import MODEL_FILE, STATS_FILE, recover_model_dir, save_model_dir, write_json_atomic
 
 REPLAY_FILE = "replay_buffer.pkl"
 EVAL_SEED_OFFSET = 10_000  # evaluation seeds never overlap training seeds
@@ -53,6 +53,13 @@ def make_env_factory(task: str, env_overrides: Dict[str, Any], seed: int, rank: 
     """A picklable constructor for one (Monitor-wrapped) environment of a vectorised set."""
 
     def _init():
+        import multiprocessing
+        import signal
+
+        if multiprocessing.parent_process() is not None:
+            # SubprocVecEnv worker: Ctrl-C reaches the whole process group, but handling it is
+            # the trainer's job (save a checkpoint, then close the workers).
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
         import fr5_rl  # noqa: F401  (registers the environments in the worker)
         from stable_baselines3.common.monitor import Monitor
 
@@ -60,8 +67,10 @@ def make_env_factory(task: str, env_overrides: Dict[str, Any], seed: int, rank: 
 
         env = FR5Env(task=task, config=env_overrides)
         filename = str(monitor_dir / f"env{rank}") if monitor_dir is not None else None
+        # Append when resuming; a new file needs its header (SB3 writes it only when overriding).
+        fresh = filename is None or not Path(f"{filename}.{Monitor.EXT}").is_file()
         env = Monitor(env, filename=filename, info_keywords=("is_success", "failure"),
-                      override_existing=False)
+                      override_existing=fresh)
         env.reset(seed=seed + rank)
         env.action_space.seed(seed + rank)
         return env
@@ -173,15 +182,25 @@ def build_callbacks(args, run_dir: Path, eval_env, meta: Dict[str, Any], t_start
 
 def save_checkpoint(model, run_dir: Path, meta: Dict[str, Any]) -> None:
     """Model + normalisation stats (+ replay buffer for off-policy) as checkpoints/latest."""
-    directory = save_model_dir(run_dir / "checkpoints" / "latest", model, model.get_vec_normalize_env(),
-                               {**meta, "num_timesteps": int(model.num_timesteps)})
-    if getattr(model, "replay_buffer", None) is not None:
-        tmp = directory / "replay_buffer.tmp.pkl"
-        model.save_replay_buffer(tmp)
-        os.replace(tmp, directory / REPLAY_FILE)
+
+    def write_replay_buffer(staging: Path) -> None:
+        if getattr(model, "replay_buffer", None) is not None:
+            model.save_replay_buffer(staging / REPLAY_FILE)
+
+    save_model_dir(run_dir / "checkpoints" / "latest", model, model.get_vec_normalize_env(),
+                   {**meta, "num_timesteps": int(model.num_timesteps)}, write_extra=write_replay_buffer)
+
+
+def parser_defaults() -> Dict[str, Any]:
+    """Default value of every command-line option."""
+    return vars(build_parser().parse_args([]))
 
 
 def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
+    return build_parser().parse_args(argv)
+
+
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--task", choices=["reach", "grasp"], default="reach")
@@ -203,7 +222,7 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     parser.add_argument("--no-subprocess", action="store_true", help="DummyVecEnv instead of SubprocVecEnv")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--torch-threads", type=int, default=1)
-    return parser.parse_args(argv)
+    return parser
 
 
 def main(argv: Optional[List[str]] = None) -> int:
@@ -227,6 +246,9 @@ def train(args: argparse.Namespace, t_start: float) -> int:
         saved = json.loads((args.run_dir / "config.json").read_text())
         for key in ("task", "algo", "seed", "n_envs", "hyperparams_resolved", "timesteps"):
             setattr(args, key, saved[key])
+        for key in ("checkpoint_freq", "eval_freq", "eval_episodes", "no_subprocess", "target_success"):
+            if key in saved and getattr(args, key) == parser_defaults()[key]:
+                setattr(args, key, saved[key])  # keep the run's settings unless given again
         hyper = args.hyperparams_resolved
     else:
         hyper = load_hyperparameters(args.algo, args.task, args.hyperparams)
@@ -261,7 +283,7 @@ def train(args: argparse.Namespace, t_start: float) -> int:
     summary: Dict[str, Any] = json.loads(summary_path.read_text()) if args.resume and summary_path.is_file() else {}
     elapsed_before = float(summary.get("wall_time_s", 0.0))
 
-    if args.resume and (latest / MODEL_FILE).is_file():
+    if args.resume and recover_model_dir(latest):
         venv = VecNormalize.load(str(latest / STATS_FILE), venv)
         model = algo_cls.load(latest / MODEL_FILE, env=venv, device="cpu")
         if (latest / REPLAY_FILE).is_file():
@@ -280,7 +302,10 @@ def train(args: argparse.Namespace, t_start: float) -> int:
                          verbose=0, **kwargs)
         write_json_atomic(run_dir / "config.json", {
             "task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
-            "timesteps": args.timesteps, "hyperparams_resolved": hyper})
+            "timesteps": args.timesteps, "hyperparams_resolved": hyper,
+            "checkpoint_freq": args.checkpoint_freq, "eval_freq": args.eval_freq,
+            "eval_episodes": args.eval_episodes, "no_subprocess": args.no_subprocess,
+            "target_success": args.target_success})
     eval_env = VecNormalize(eval_env, training=False, norm_obs=venv.norm_obs, norm_reward=False,
                             clip_obs=venv.clip_obs)
     summary.update({"task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
