@@ -159,15 +159,27 @@ def load_env_config(overrides: Optional[Mapping[str, Any]] = None, path: str | P
     return cfg
 
 
+def simulation_settings(cfg: Mapping[str, Any], task: str) -> Dict[str, Any]:
+    """``simulation`` with the task's own overrides (``<task>.simulation``) applied."""
+    merged = dict(cfg["simulation"])
+    for key, value in (cfg.get(task, {}).get("simulation") or {}).items():
+        if key not in merged:
+            raise ConfigError(f"{task}.simulation: unknown key '{key}'; known: {sorted(merged)}")
+        merged[key] = value
+    return merged
+
+
 def validate_env_config(cfg: Mapping[str, Any], robot: RobotSpec) -> None:
     """Refuse settings that would break the real robot's limits or the simulation."""
-    sim = cfg["simulation"]
-    control_dt, physics_dt = float(sim["control_dt"]), float(sim["physics_dt"])
-    substeps = control_dt / physics_dt
-    if physics_dt <= 0 or abs(substeps - round(substeps)) > 1e-6 or round(substeps) < 1:
-        raise ConfigError(
-            f"simulation.physics_dt ({physics_dt}) must divide control_dt ({control_dt}) evenly"
-        )
+    for task in ("base", "reach", "grasp"):
+        sim = cfg["simulation"] if task == "base" else simulation_settings(cfg, task)
+        control_dt, physics_dt = float(sim["control_dt"]), float(sim["physics_dt"])
+        substeps = control_dt / physics_dt if physics_dt > 0 else 0.0
+        if physics_dt <= 0 or abs(substeps - round(substeps)) > 1e-6 or round(substeps) < 1:
+            raise ConfigError(
+                f"{task}: simulation.physics_dt ({physics_dt}) must divide control_dt ({control_dt}) evenly"
+            )
+    control_dt = float(cfg["simulation"]["control_dt"])
     max_step = float(cfg["action"]["max_joint_step"])
     allowed = float(np.min(robot.velocity_limits)) * control_dt
     if not 0.0 < max_step <= allowed + 1e-12:

@@ -6,6 +6,7 @@ command mapped to an opening width in [0, max opening width] (m).
 """
 from __future__ import annotations
 
+import math
 from typing import Any, Mapping
 
 import numpy as np
@@ -44,12 +45,20 @@ class JointCommandShaper:
                 f"expected an action of shape ({ACTION_SIZE},) and {self._lower.shape[0]} joint "
                 f"positions, got {action.shape} and {measured.shape}"
             )
-        if not (np.isfinite(action).all() and np.isfinite(measured).all()):
+        # One sum is finite exactly when every term is (overflowing input is refused too).
+        if not math.isfinite(action.sum() + measured.sum()):
             raise ValueError("action or measured joint positions contain NaN or inf")
-        step = np.minimum(np.maximum(action[:6], -1.0), 1.0) * self._max_step
-        filtered = self._alpha * step + (1.0 - self._alpha) * self._filtered_step
-        self._filtered_step = np.minimum(np.maximum(filtered, -self._step_limit), self._step_limit)
-        return np.minimum(np.maximum(measured + self._filtered_step, self._lower), self._upper)
+        step = np.minimum(action[:6], 1.0)
+        np.maximum(step, -1.0, out=step)
+        step *= self._alpha * self._max_step
+        step += (1.0 - self._alpha) * self._filtered_step
+        np.minimum(step, self._step_limit, out=step)
+        np.maximum(step, -self._step_limit, out=step)
+        targets = measured + step
+        np.minimum(targets, self._upper, out=targets)
+        np.maximum(targets, self._lower, out=targets)
+        self._filtered_step = step
+        return targets
 
     def gripper_width(self, action: np.ndarray) -> float:
         """Commanded opening width (m) from the action's last component (-1 closed, +1 open)."""

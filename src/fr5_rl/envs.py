@@ -7,6 +7,7 @@ controller tracks it for ``control_dt`` seconds, and the observation is built by
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import Any, Dict, Mapping, Optional, Tuple
 
@@ -15,7 +16,7 @@ import numpy as np
 import pybullet as p
 from gymnasium import spaces
 
-from .config import load_env_config, load_robot_spec
+from .config import load_env_config, load_robot_spec, simulation_settings
 from .control import ACTION_SIZE, JointCommandShaper
 from .kinematics import ForwardKinematics
 from .observation import ObservationBuilder, ObservationInputs
@@ -24,6 +25,8 @@ from .sim.world import PyBulletWorld
 from .tasks import GraspTask, ReachTask, Task, TaskState
 
 TASKS = {"reach": ReachTask, "grasp": GraspTask}
+_REWARD_KEYS = {name: f"reward_{name}" for name in ("success", "collision", "progress", "action")}
+_TERM_KEYS = {name: f"term_{name}" for name in ("approach", "orientation", "gripper", "lift")}
 
 
 class FR5Env(gym.Env):
@@ -56,9 +59,10 @@ class FR5Env(gym.Env):
         self.observation_space = spaces.Box(-1.0, 1.0, (self.observation_builder.size,), dtype=np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
 
-        self.world = PyBulletWorld(self.cfg["simulation"], gui=render_mode == "human")
+        sim_cfg = simulation_settings(self.cfg, task)
+        self.world = PyBulletWorld(sim_cfg, gui=render_mode == "human")
         self.world.add_table(self.cfg["table"])
-        self.robot = FR5Robot(self.world.client, self.robot_spec, self.cfg["simulation"])
+        self.robot = FR5Robot(self.world.client, self.robot_spec, sim_cfg)
         # The robot stands on the table: its base never counts as touching it.
         for link in (-1, 0):
             p.setCollisionFilterPair(self.robot.body, self.world.table_id, link, -1, 0,
@@ -72,8 +76,7 @@ class FR5Env(gym.Env):
         self._obs_noise_std = 0.0
         self._steps = 0
         self._measured_joint_positions = self.robot_spec.home_joint_positions.copy()
-        self._workspace_low = np.asarray(self.cfg["workspace"]["low"])
-        self._workspace_high = np.asarray(self.cfg["workspace"]["high"])
+        self._workspace = (tuple(self.cfg["workspace"]["low"]), tuple(self.cfg["workspace"]["high"]))
         self._object_cfg = obj
 
     # ------------------------------------------------------------------ gym API
@@ -102,12 +105,13 @@ class FR5Env(gym.Env):
         return obs, {"is_success": False, "failure": None, "object_start": self._object_start.copy()}
 
     def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:
-        action = np.asarray(action, dtype=np.float64).reshape(-1)
+        action = np.asarray(action, dtype=np.float64)
         if action.shape != (ACTION_SIZE,):
             raise ValueError(f"action must have {ACTION_SIZE} values, got shape {action.shape}")
-        if not np.isfinite(action).all():
+        if not math.isfinite(action.sum()):
             raise ValueError("action contains NaN or inf")
-        action = np.minimum(np.maximum(action, -1.0), 1.0)
+        action = np.minimum(action, 1.0)
+        np.maximum(action, -1.0, out=action)
         applied = self._delayed(action)
         # The joint state measured by the last observation is still current: nothing moved since.
         targets = self.shaper.arm_targets(applied, self._measured_joint_positions)
@@ -122,8 +126,10 @@ class FR5Env(gym.Env):
         terminated = outcome.success or outcome.failure is not None
         truncated = not terminated and self._steps >= self.task.max_steps
         info: Dict[str, Any] = {"is_success": outcome.success, "failure": outcome.failure}
-        info.update({f"reward_{name}": value for name, value in parts.items()})
-        info.update({f"term_{name}": value for name, value in outcome.terms.items()})
+        for name, value in parts.items():
+            info[_REWARD_KEYS[name]] = value
+        for name, value in outcome.terms.items():
+            info[_TERM_KEYS[name]] = value
         if truncated:
             info["failure"] = "timeout"
         if self.render_mode == "human":
@@ -169,7 +175,6 @@ class FR5Env(gym.Env):
         self._measured = (q, qd, width)
         tcp_position, tcp_rotation = self.robot.tcp_pose_from_simulator()
         object_position, object_quaternion = self.world.object_pose()
-        object_up = p.getMatrixFromQuaternion(object_quaternion)[2::3]
         table, obj, finger_links = self.world.table_id, self.world.object_id, self.robot.finger_links
         table_contact = arm_object_contact = False
         pads = set()
@@ -181,14 +186,15 @@ class FR5Env(gym.Env):
                     pads.add(contact[3])
                 else:
                     arm_object_contact = True
+        x, y, z = tcp_position
+        (x_low, y_low, z_low), (x_high, y_high, z_high) = self._workspace
         return TaskState(
             tcp_position=tcp_position, tcp_rotation=tcp_rotation, gripper_width=width,
-            tcp_to_object_distance=float(np.sqrt(((object_position - tcp_position) ** 2).sum())),
-            object_position=object_position, object_up_axis=object_up,
+            tcp_to_object_distance=math.dist(object_position, tcp_position),
+            object_position=object_position, object_up_axis=p.getMatrixFromQuaternion(object_quaternion)[2::3],
             object_start_position=self._object_start, robot_table_contact=table_contact,
             arm_object_contact=arm_object_contact, fingers_object_contact=len(pads),
-            tcp_in_workspace=bool((tcp_position >= self._workspace_low).all()
-                                  and (tcp_position <= self._workspace_high).all()),
+            tcp_in_workspace=x_low <= x <= x_high and y_low <= y <= y_high and z_low <= z <= z_high,
         )
 
     def _observe(self) -> Tuple[TaskState, np.ndarray]:

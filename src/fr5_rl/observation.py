@@ -50,35 +50,48 @@ class ObservationInputs:
 
 
 class ObservationBuilder:
-    """Normalises :class:`ObservationInputs` into the policy's observation vector."""
+    """Normalises :class:`ObservationInputs` into the policy's observation vector.
+
+    The raw values are laid out in one float64 vector and mapped with a single affine
+    transform ``(raw - offset) * gain`` followed by clipping: the layout table above, as data.
+    """
 
     def __init__(self, robot: RobotSpec, obs_cfg: Mapping[str, Any], include_lift: bool) -> None:
-        self._joint_mid = (robot.upper_limits + robot.lower_limits) / 2.0
-        self._joint_half_range = (robot.upper_limits - robot.lower_limits) / 2.0
-        self._velocity_limits = robot.velocity_limits.copy()
-        self._max_width = robot.max_opening_width
-        low = np.asarray(obs_cfg["tcp_position_low"], dtype=np.float64)
-        high = np.asarray(obs_cfg["tcp_position_high"], dtype=np.float64)
-        self._tcp_mid, self._tcp_half_range = (high + low) / 2.0, (high - low) / 2.0
-        self._relative_scale = float(obs_cfg["relative_position_scale"])
-        self._lift_scale = float(obs_cfg["lift_scale"])
         self.include_lift = include_lift
         self.size = GRASP_OBSERVATION_SIZE if include_lift else REACH_OBSERVATION_SIZE
+        low = np.asarray(obs_cfg["tcp_position_low"], dtype=np.float64)
+        high = np.asarray(obs_cfg["tcp_position_high"], dtype=np.float64)
+        half_width = robot.max_opening_width / 2.0
+        offset = np.zeros(GRASP_OBSERVATION_SIZE)
+        half_range = np.ones(GRASP_OBSERVATION_SIZE)
+        offset[0:6] = (robot.upper_limits + robot.lower_limits) / 2.0
+        half_range[0:6] = (robot.upper_limits - robot.lower_limits) / 2.0
+        half_range[6:12] = robot.velocity_limits
+        offset[12:14], half_range[12:14] = half_width, half_width
+        offset[14:17], half_range[14:17] = (high + low) / 2.0, (high - low) / 2.0
+        half_range[20:23] = float(obs_cfg["relative_position_scale"])
+        half_range[23] = float(obs_cfg["lift_scale"])
+        self._offset = offset[: self.size]
+        self._gain = 1.0 / half_range[: self.size]
+        self._raw = np.zeros(self.size)
 
     def build(self, inputs: ObservationInputs, out: Optional[np.ndarray] = None) -> np.ndarray:
         """Return the float32 observation in [-1, 1]; raises ValueError on non-finite input."""
-        obs = np.empty(self.size, dtype=np.float32) if out is None else out
-        tcp_position = np.asarray(inputs.tcp_position)
-        obs[0:6] = (inputs.joint_positions - self._joint_mid) / self._joint_half_range
-        obs[6:12] = inputs.joint_velocities / self._velocity_limits
-        obs[12] = 2.0 * inputs.gripper_width / self._max_width - 1.0
-        obs[13] = 2.0 * inputs.gripper_command_width / self._max_width - 1.0
-        obs[14:17] = (tcp_position - self._tcp_mid) / self._tcp_half_range
-        obs[17:20] = np.asarray(inputs.tcp_rotation)[:, 2]
-        obs[20:23] = (inputs.object_position - tcp_position) / self._relative_scale
+        raw = self._raw
+        raw[0:6] = inputs.joint_positions
+        raw[6:12] = inputs.joint_velocities
+        raw[12] = inputs.gripper_width
+        raw[13] = inputs.gripper_command_width
+        raw[14:17] = inputs.tcp_position
+        raw[17:20] = np.asarray(inputs.tcp_rotation)[:, 2]
+        raw[20:23] = inputs.object_position
+        raw[20:23] -= raw[14:17]
         if self.include_lift:
-            obs[23] = inputs.object_lift / self._lift_scale
-        if not np.isfinite(obs).all():
+            raw[23] = inputs.object_lift
+        scaled = (raw - self._offset) * self._gain
+        if not np.isfinite(scaled).all():
             raise ValueError("observation inputs contain NaN or inf")
-        np.minimum(np.maximum(obs, -1.0, out=obs), 1.0, out=obs)
+        obs = np.empty(self.size, dtype=np.float32) if out is None else out
+        np.clip(scaled, -1.0, 1.0, out=scaled)
+        obs[:] = scaled
         return obs
