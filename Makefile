@@ -7,7 +7,7 @@ TASK ?= reach
 ALGO ?= ppo
 EPISODES ?= 5
 
-.PHONY: setup demo test test-unit test-ros bench train evaluate meshes lint clean help
+.PHONY: setup demo test bench bench-grasp train meshes lint clean help
 
 help:
 	@echo "make demo   - set up, then run the closed loop (simulator + policy) with the shipped model"
@@ -25,8 +25,17 @@ demo: setup
 test: setup
 	@$(ENV) bash tools/run_tests.sh
 
+# Env speed + inference latency, the ROS loop (timing, sim-to-ROS parity), time to solve reach.
+# BENCH_ARGS=--quick for a smoke run; `make bench-grasp` adds the grasp time to solve (~15 min).
 bench: setup
-	@$(ENV) python tools/bench.py
+	@$(ENV) python tools/bench_ros.py
+	@$(ENV) python tools/bench_train.py --task reach
+	@$(ENV) python tools/bench.py $(BENCH_ARGS)
+
+bench-grasp: setup
+	@$(ENV) python tools/bench_train.py --task grasp
+	@$(ENV) python tools/bench_ros.py --model models/grasp --episodes 20
+	@$(ENV) python tools/bench.py --skip-env --model models/grasp --results bench/results/grasp
 
 train: setup
 	@$(ENV) rosrun fr5_rl train.py --task $(TASK) --algo $(ALGO)

@@ -16,13 +16,18 @@ from .transforms import quaternion_from_matrix
 
 
 class ScriptedExpert:
-    """Waypoint expert: above the object -> down to it -> (grasp) close -> lift and hold."""
+    """Waypoint expert: above the object -> down to it -> (grasp) close -> lift and hold.
+
+    It keeps no memory between calls: the phase is read off the current state each step
+    (where the tcp is relative to the object, whether both finger pads touch it), so it can
+    label any state a learner visits (DAgger) and recovers when something goes wrong.
+    """
 
     hover_height = 0.10  # m above the object centre before descending
     lift_clearance = 0.10  # m the expert lifts (the task needs lift_height)
-    waypoint_tolerance = 0.01  # m
     grasp_height_offset = 0.015  # m above the object centre where the fingers close
-    close_steps = 30  # control steps the fingers get to close (0.6 s: full stroke ~0.5 s)
+    align_tolerance = 0.01  # m horizontal error under which the expert descends
+    at_grasp_tolerance = 0.008  # m from the grasp point under which it closes
     # Cartesian speed per phase (m per 20 ms control step): fast in free space, slow near the
     # object so that the arm's few steps of tracking lag do not overshoot into it.
     phase_speed = {"hover": 0.015, "descend": 0.006, "close": 0.006, "lift": 0.006}
@@ -38,16 +43,11 @@ class ScriptedExpert:
         self._ranges = [u - l for u, l in zip(self._upper, self._lower)]
         self._rest = spec.home_joint_positions.tolist() + [0.0, 0.0]
         self._max_step = float(self.env.cfg["action"]["max_joint_step"])
-        self.reset()
+        self.phase = "hover"
 
     def reset(self) -> None:
-        """Call after env.reset()."""
+        """Nothing to forget (the expert is stateless); kept for a uniform actor interface."""
         self.phase = "hover"
-        self._phase_steps = 0
-        self._hold_point: Optional[np.ndarray] = None
-
-    def _set_phase(self, phase: str) -> None:
-        self.phase, self._phase_steps = phase, 0
 
     def act(self, observation: Optional[np.ndarray] = None) -> np.ndarray:
         """Next action in [-1, 1]^7 (the observation is unused: the expert reads the simulator)."""
@@ -56,30 +56,29 @@ class ScriptedExpert:
         tcp, _ = env.kinematics.tcp_pose(q)
         obj = env.object_position()
         grasp = env.task.name == "grasp"
-        self._phase_steps += 1
-        if self.phase == "hover":
-            target = obj + np.array([0.0, 0.0, self.hover_height])
-            if np.linalg.norm(target - tcp) < self.waypoint_tolerance:
-                self._set_phase("descend")
-        if self.phase == "descend":
-            target = obj + np.array([0.0, 0.0, self.grasp_height_offset if grasp else 0.0])
-            error = np.linalg.norm(target - tcp)
-            # Close once there, or once nearly there and no longer getting closer (the arm's
-            # position controller can settle a few millimetres off under gravity).
-            if grasp and (error < 0.005 or (self._phase_steps > 40 and error < 0.012)):
-                self._set_phase("close")
-                self._hold_point = target.copy()
-        if self.phase == "close":
-            target = self._hold_point
-            if self._phase_steps > self.close_steps:
-                self._set_phase("lift")
-        if self.phase == "lift":
-            target = self._hold_point + np.array([0.0, 0.0, self.lift_clearance])
+        grasp_point = obj + np.array([0.0, 0.0, self.grasp_height_offset if grasp else 0.0])
+        horizontal_error = float(np.linalg.norm((grasp_point - tcp)[:2]))
+        held = grasp and env.task_state().fingers_object_contact == 2 and \
+            self.env._gripper_command_width < env.robot_spec.max_opening_width / 2.0
+        if held:
+            self.phase, target = "lift", obj + np.array([0.0, 0.0, self.lift_clearance])
+            target[2] = env._object_start[2] + self.grasp_height_offset + self.lift_clearance
+        elif grasp and np.linalg.norm(grasp_point - tcp) < self.at_grasp_tolerance:
+            self.phase, target = "close", grasp_point
+        elif horizontal_error < self.align_tolerance + 0.5 * max(tcp[2] - grasp_point[2], 0.0):
+            # A funnel: the higher above the grasp point, the more lateral error is fine, since
+            # the straight line down removes it on the way.
+            self.phase, target = "descend", grasp_point
+        else:
+            self.phase, target = "hover", obj + np.array([0.0, 0.0, self.hover_height])
         # Straight-line Cartesian motion: IK for a point a short step along the line, slowing
         # down over the last centimetres.
         offset = target - tcp
         distance = float(np.linalg.norm(offset))
-        step = min(self.phase_speed[self.phase], 0.35 * distance)
+        speed = self.phase_speed[self.phase]
+        if self.phase == "descend" and tcp[2] - grasp_point[2] > (0.06 if grasp else 0.03):
+            speed = self.phase_speed["hover"]  # slow only for the last centimetres
+        step = min(speed, 0.35 * distance)
         if distance > step:
             target = tcp + offset * (step / distance)
         q_target = self._inverse_kinematics(target)

@@ -83,6 +83,8 @@ class PolicyNode:
         self._previous_positions: Optional[Tuple[np.ndarray, float]] = None
         self._target: Optional[Tuple[PoseStamped, float]] = None
         self._last_tick: Optional[float] = None
+        self._last_object_position: Optional[np.ndarray] = None
+        self.new_target_jump = 0.05  # m between two cycles: the object was replaced
         self._timing = deque(maxlen=500)
         self._lock = threading.Lock()
 
@@ -190,6 +192,10 @@ class PolicyNode:
             rospy.loginfo(f"policy_node: inputs good, running (was: {self.holding_reason})")
             self.holding_reason = None
             self.shaper.reset()
+        elif self._last_object_position is not None and \
+                np.linalg.norm(object_position - self._last_object_position) > self.new_target_jump:
+            self.shaper.reset()  # a new object: start like an episode starts, without old momentum
+        self._last_object_position = object_position
         inference_start = time.perf_counter()
         action = self.policy.act(observation)
         inference = time.perf_counter() - inference_start

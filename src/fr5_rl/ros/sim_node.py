@@ -19,6 +19,7 @@ against it:
 from __future__ import annotations
 
 import json
+import sys
 import threading
 import time
 from collections import deque
@@ -33,6 +34,7 @@ from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import Trigger, TriggerResponse
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ..config import ConfigError
 from ..envs import FR5Env
 from ..transforms import load_static_transforms, matrix_from_quaternion, quaternion_from_matrix, transform_in
 from .params import node_parameters
@@ -43,11 +45,19 @@ class SimulatorNode:
 
     def __init__(self) -> None:
         self.params = params = node_parameters("sim_node")
-        self.env = FR5Env(task=str(params["task"]))
+        task = str(params["task"])
+        # The stand-in arm runs at its own physics step (finer than reach training uses), one
+        # physics step per /joint_states message, so simulated time keeps pace with the clock.
+        self.env = FR5Env(task=task, config={task: {"simulation": {"physics_dt": float(params["physics_dt"]),
+                                                                      "solver_iterations": int(params["solver_iterations"])}}})
         self.spec = self.env.robot_spec
         self.physics_dt = self.env.world.physics_dt
         self.tick_dt = 1.0 / float(params["publish_rate"])
-        self.substeps_per_tick = max(int(round(self.tick_dt / self.physics_dt)), 1)
+        ratio = self.tick_dt / self.physics_dt
+        if ratio < 1.0 - 1e-6 or abs(ratio - round(ratio)) > 1e-6:
+            raise ConfigError(f"sim_node: 1 / publish_rate ({self.tick_dt:g} s) must be a whole multiple of "
+                              f"physics_dt ({self.physics_dt:g} s), or simulated time would drift from the clock")
+        self.substeps_per_tick = int(round(ratio))
         self.tick_physics_time = self.substeps_per_tick * self.physics_dt
         self.ticks_per_control = max(int(round(self.env.control_dt / (self.substeps_per_tick * self.physics_dt))), 1)
         self.camera_in_base = transform_in(load_static_transforms(), self.spec.base_frame, str(params["camera_frame"]))
@@ -229,7 +239,11 @@ class SimulatorNode:
 
 def main() -> None:
     rospy.init_node("fr5_sim")
-    node = SimulatorNode()
+    try:
+        node = SimulatorNode()
+    except ConfigError as error:
+        rospy.logfatal(str(error))
+        sys.exit(1)
     node.spin()
     node.env.close()
     if not rospy.is_shutdown():

@@ -35,6 +35,7 @@ def write_json_atomic(path: Path, data: Dict[str, Any]) -> None:
     with os.fdopen(fd, "w", encoding="utf-8") as stream:
         json.dump(data, stream, indent=2, sort_keys=True)
         stream.write("\n")
+    os.chmod(tmp, 0o644)  # mkstemp makes it private; these are ordinary results
     os.replace(tmp, path)
 
 

@@ -126,6 +126,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--seed-start", type=int, default=HELD_OUT_SEED_START)
     parser.add_argument("--config", type=str, default=None,
                         help="JSON env overrides merged over the model's, e.g. '{\"randomisation\": {\"enabled\": true}}'")
+    parser.add_argument("--training-env", action="store_true",
+                        help="evaluate with the model's training overrides (e.g. its randomisation)")
     parser.add_argument("--out", type=Path, default=None, help="summary JSON (default: MODEL_DIR/eval.json)")
     parser.add_argument("--csv", type=Path, default=None, help="per-episode CSV (default: beside the summary)")
     parser.add_argument("--gif", type=Path, default=None, help="record the first episode as a GIF")
@@ -159,7 +161,9 @@ def main(argv: Optional[List[str]] = None) -> int:
             print(f"evaluate.py: {error}", file=sys.stderr)
             return 2
         task, label = policy.task, str(args.model_dir)
-        overrides = dict(policy.meta.get("env_overrides", {}))
+        # The task as registered, not the training variant (which may randomise); use
+        # --training-env for that.
+        overrides = dict(policy.meta.get("env_overrides", {})) if args.training_env else {}
 
         def make_actor(env):
             return policy.act, None

@@ -1,0 +1,221 @@
+"""``rosrun fr5_rl imitate.py``: learn a policy from the scripted expert with DAgger.
+
+Behaviour cloning alone copies the expert on the states the expert visits, and drifts once
+the learner's own small errors take it elsewhere. DAgger (Ross et al., 2011) fixes that: each
+round the learner drives, the expert labels every state the learner reached, the labels join
+the data set, and the learner is re-fitted on all of it. The expert is privileged (it reads the
+simulator's ground truth), the learner sees only the observation the ROS node can build, so
+observation noise, latency and mass/friction randomisation can be on while it learns.
+
+The result is an ordinary model directory (SB3 PPO ``model.zip`` whose actor holds the learned
+weights, ``vecnormalize.pkl`` with the data set's statistics, ``meta.json``), so evaluate.py,
+export_onnx.py, the ROS node and ``train.py --init-model`` (PPO fine-tuning) all take it.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Tuple
+
+import numpy as np
+
+from ..config import load_env_config, load_yaml
+from .artifacts import save_model_dir, write_json_atomic
+from .train import EVAL_SEED_OFFSET, machine_description
+
+
+def rollouts(env, expert, learner, episodes: int, seed: int, expert_probability: float,
+             rng: np.random.Generator) -> Tuple[np.ndarray, np.ndarray, float]:
+    """Run ``episodes`` episodes; return (observations, expert labels, learner-driven success).
+
+    Each step the expert's action is executed with ``expert_probability``, the learner's
+    otherwise; every visited observation is labelled with the expert's action.
+    """
+    observations: List[np.ndarray] = []
+    labels: List[np.ndarray] = []
+    successes = 0
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=seed + episode)
+        expert.reset()
+        done, info = False, {}
+        while not done:
+            label = expert.act(obs)
+            observations.append(obs.copy())
+            labels.append(label)
+            use_expert = learner is None or rng.random() < expert_probability
+            action = label if use_expert else learner(obs)
+            obs, _, terminated, truncated, info = env.step(action)
+            done = terminated or truncated
+        successes += bool(info.get("is_success"))
+    return np.asarray(observations, np.float32), np.asarray(labels, np.float32), successes / max(episodes, 1)
+
+
+class Normaliser:
+    """Observation statistics in the form SB3's VecNormalize keeps them."""
+
+    def __init__(self, observations: np.ndarray, clip: float = 10.0, epsilon: float = 1e-8) -> None:
+        self.mean = observations.mean(axis=0).astype(np.float64)
+        self.var = observations.var(axis=0).astype(np.float64)
+        self.count = float(len(observations))
+        self.clip, self.epsilon = clip, epsilon
+
+    def __call__(self, observations: np.ndarray) -> np.ndarray:
+        return np.clip((observations - self.mean) / np.sqrt(self.var + self.epsilon), -self.clip, self.clip)
+
+
+def fit(model, normaliser: Normaliser, observations: np.ndarray, labels: np.ndarray, epochs: int,
+        batch_size: int = 256, learning_rate: float = 1e-3, seed: int = 0) -> float:
+    """Regress the PPO actor's mean action onto the expert labels (MSE); returns final loss."""
+    import torch
+
+    torch.manual_seed(seed)
+    policy = model.policy
+    parameters = list(policy.mlp_extractor.policy_net.parameters()) + list(policy.action_net.parameters())
+    optimiser = torch.optim.Adam(parameters, lr=learning_rate)
+    x = torch.as_tensor(normaliser(observations), dtype=torch.float32)
+    y = torch.as_tensor(np.clip(labels, -1.0, 1.0), dtype=torch.float32)
+    generator = torch.Generator().manual_seed(seed)
+    loss_value = float("nan")
+    for _ in range(epochs):
+        order = torch.randperm(len(x), generator=generator)
+        for start in range(0, len(x), batch_size):
+            index = order[start:start + batch_size]
+            latent = policy.mlp_extractor.forward_actor(policy.extract_features(x[index], policy.pi_features_extractor))
+            loss = torch.mean((policy.action_net(latent) - y[index]) ** 2)
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+            loss_value = float(loss.detach())
+    return loss_value
+
+
+def make_learner(model, normaliser: Normaliser):
+    """Deterministic actor as a function: raw observation -> action in [-1, 1]."""
+    import torch
+
+    policy = model.policy
+
+    def act(observation: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            x = torch.as_tensor(normaliser(observation[None]), dtype=torch.float32)
+            latent = policy.mlp_extractor.forward_actor(policy.extract_features(x, policy.pi_features_extractor))
+            return np.clip(policy.action_net(latent).numpy()[0], -1.0, 1.0)
+
+    return act
+
+
+def build_model_and_stats(task: str, env_overrides: Dict[str, Any], hyper: Dict[str, Any], normaliser: Normaliser, seed: int):
+    """An SB3 PPO model of the configured architecture and a VecNormalize holding our stats."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from ..envs import FR5Env
+
+    venv = VecNormalize(DummyVecEnv([lambda: FR5Env(task=task, config=env_overrides)]), norm_obs=True,
+                        norm_reward=False, clip_obs=normaliser.clip, epsilon=normaliser.epsilon)
+    kwargs = dict(hyper["algo_kwargs"])
+    kwargs.pop("policy", None)
+    model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **kwargs)
+    return model, venv
+
+
+def sync_stats(venv, normaliser: Normaliser) -> None:
+    venv.obs_rms.mean, venv.obs_rms.var, venv.obs_rms.count = normaliser.mean, normaliser.var, normaliser.count
+    venv.training = False
+
+
+def evaluate(env, learner, episodes: int, seed: int) -> float:
+    successes = 0
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=seed + episode)
+        done, info = False, {}
+        while not done:
+            obs, _, terminated, truncated, info = env.step(learner(obs))
+            done = terminated or truncated
+        successes += bool(info.get("is_success"))
+    return successes / max(episodes, 1)
+
+
+def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--task", choices=["reach", "grasp"], default="grasp")
+    parser.add_argument("--hyperparams", default=None, help="architecture/env YAML (default: config/dagger_<task>.yaml)")
+    parser.add_argument("--run-dir", type=Path, default=None)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--rounds", type=int, default=None, help="DAgger rounds after the expert round")
+    parser.add_argument("--episodes", type=int, default=None, help="episodes per round")
+    parser.add_argument("--epochs", type=int, default=None, help="fitting epochs per round")
+    parser.add_argument("--eval-episodes", type=int, default=50)
+    parser.add_argument("--torch-threads", type=int, default=1)
+    return parser.parse_args(argv)
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    import torch
+
+    from ..envs import FR5Env
+    from ..expert import ScriptedExpert
+
+    t_start = time.time()
+    args = parse_args(argv if argv is not None else [a for a in sys.argv[1:] if not a.startswith("__")])
+    torch.set_num_threads(args.torch_threads)
+    hyper = load_yaml(args.hyperparams or f"dagger_{args.task}")
+    dagger = hyper.get("dagger", {})
+    rounds = args.rounds if args.rounds is not None else int(dagger.get("rounds", 8))
+    episodes = args.episodes or int(dagger.get("episodes", 100))
+    epochs = args.epochs or int(dagger.get("epochs", 20))
+    env_overrides = hyper.get("env", {})
+    run_dir = args.run_dir or Path("runs") / f"{args.task}_dagger_{time.strftime('%Y%m%d-%H%M%S')}"
+    run_dir.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(args.seed)
+
+    env = FR5Env(task=args.task, config=env_overrides)
+    eval_env = FR5Env(task=args.task, config=env_overrides)
+    expert = ScriptedExpert(env)
+    observations, labels, expert_success = rollouts(env, expert, None, episodes, args.seed, 1.0, rng)
+    print(f"round 0: expert demonstrations, {len(observations)} samples, expert success {expert_success:.0%}")
+    history = [{"round": 0, "samples": len(observations), "driver_success": expert_success,
+                "wall_s": round(time.time() - t_start, 1)}]
+    model = venv = None
+    best = (-1.0, None)
+    for round_index in range(1, rounds + 1):
+        normaliser = Normaliser(observations)
+        if model is None:
+            model, venv = build_model_and_stats(args.task, env_overrides, hyper, normaliser, args.seed)
+        loss = fit(model, normaliser, observations, labels, epochs, seed=args.seed + round_index,
+                   learning_rate=float(dagger.get("learning_rate", 1e-3)))
+        learner = make_learner(model, normaliser)
+        success = evaluate(eval_env, learner, args.eval_episodes, args.seed + EVAL_SEED_OFFSET)
+        sync_stats(venv, normaliser)
+        meta = {"task": args.task, "algo": "ppo", "trained_by": "dagger", "env_overrides": env_overrides,
+                "env_config": env.cfg, "robot_config": load_yaml("robot"),
+                "observation_size": int(env.observation_space.shape[0]), "action_size": 7,
+                "control_dt": env.control_dt, "seed": args.seed, "num_timesteps": int(len(observations)),
+                "dagger_round": round_index}
+        if success > best[0]:
+            best = (success, round_index)
+            save_model_dir(run_dir / "best", model, venv, meta)
+        save_model_dir(run_dir / "final", model, venv, meta)
+        history.append({"round": round_index, "samples": int(len(observations)), "fit_loss": loss,
+                        "eval_success": success, "wall_s": round(time.time() - t_start, 1)})
+        print(f"round {round_index}: {len(observations)} samples, loss {loss:.4f}, "
+              f"learner success {success:.0%} on {args.eval_episodes} episodes")
+        write_json_atomic(run_dir / "summary.json", {
+            "task": args.task, "method": "dagger", "history": history, "best_round": best[1],
+            "best_eval_success": best[0], "wall_time_s": round(time.time() - t_start, 1),
+            "machine": machine_description(), "seed": args.seed})
+        if round_index == rounds:
+            break
+        # The learner drives (with a decaying share of expert steps), the expert labels.
+        beta = float(dagger.get("expert_share_decay", 0.5)) ** round_index
+        new_obs, new_labels, _ = rollouts(env, expert, learner, episodes, args.seed + 1000 * round_index, beta, rng)
+        observations = np.concatenate([observations, new_obs])
+        labels = np.concatenate([labels, new_labels])
+    env.close()
+    eval_env.close()
+    print(f"best round {best[1]}: success {best[0]:.0%}; run directory {run_dir}")
+    return 0
