@@ -37,5 +37,5 @@ if export_onnx.main([str(args.target), "--check", "1000"]) != 0:
     sys.exit("ONNX export failed its parity check")
 if evaluate.main([str(args.target), "--episodes", str(args.episodes)]) != 0:
     sys.exit("evaluation failed")
-if (run_dir / "eval" / "evaluations.npz").is_file():
+if (run_dir / "eval" / "evaluations.npz").is_file() or summary.get("method") == "dagger":
     evaluate.main(["--plot", str(run_dir), "--plot-out", f"docs/learning_curve_{meta['task']}.png"])

@@ -70,8 +70,7 @@ class PolicyNode:
         obj = self.env_cfg["object"]
         rest_height = float(obj["height"]) / 2.0 if obj["shape"] == "cylinder" else float(obj["half_extent"])
         self.object_rest_z = float(self.env_cfg["table"]["top_height"]) + rest_height
-        gripper = str(params["command_gripper"]).lower()
-        self.command_gripper = gripper == "true" or (gripper == "auto" and self.policy.task == "grasp")
+        self.command_gripper = bool(params["command_gripper"])
         self.base_frame = str(params["base_frame"])
         self.joint_timeout = float(params["joint_state_timeout"])
         self.target_timeout = float(params["target_timeout"])
@@ -207,8 +206,10 @@ class PolicyNode:
         message.layout.dim = [MultiArrayDimension(label="j1..j6", size=6, stride=6)]
         message.data = targets.tolist()
         self.command_pub.publish(message)
+        # The commanded width is part of the next observation whether or not it is sent, exactly
+        # as in training.
+        self.gripper_command_width = self.shaper.gripper_width(action)
         if self.command_gripper:
-            self.gripper_command_width = self.shaper.gripper_width(action)
             self.gripper_pub.publish(Float64(data=self.gripper_command_width))
         published = time.perf_counter()
         state_age = (rospy.Time.now() - stamp).to_sec() if stamp and stamp.to_sec() > 0 else float("nan")

@@ -58,8 +58,6 @@ class SimulatorNode:
             raise ConfigError(f"sim_node: 1 / publish_rate ({self.tick_dt:g} s) must be a whole multiple of "
                               f"physics_dt ({self.physics_dt:g} s), or simulated time would drift from the clock")
         self.substeps_per_tick = int(round(ratio))
-        self.tick_physics_time = self.substeps_per_tick * self.physics_dt
-        self.ticks_per_control = max(int(round(self.env.control_dt / (self.substeps_per_tick * self.physics_dt))), 1)
         self.camera_in_base = transform_in(load_static_transforms(), self.spec.base_frame, str(params["camera_frame"]))
         self.base_in_camera = np.linalg.inv(self.camera_in_base)
         self.rng = np.random.default_rng(int(params["seed"]))
@@ -203,30 +201,47 @@ class SimulatorNode:
 
     # ------------------------------------------------------------------ main loop
     def spin(self) -> None:
-        """Step physics and publish at ``~publish_rate`` until shutdown or the last episode."""
+        """Step physics and publish at ``~publish_rate`` until shutdown or the last episode.
+
+        Simulated time is kept locked to the wall clock, as a real arm's would be: when a tick
+        comes late (a loaded machine), the missed physics steps are run before publishing, so
+        a command always acts for as long in simulation as it did in reality.
+        """
         rate = rospy.Rate(float(self.params["publish_rate"]))
-        camera_every = max(int(round(float(self.params["publish_rate"]) / float(self.params["camera_rate"]))), 1)
-        marker_every = max(int(round(float(self.params["publish_rate"]) / float(self.params["marker_rate"]))), 1)
-        tick = 0
+        camera_period = 1.0 / float(self.params["camera_rate"])
+        marker_period = 1.0 / float(self.params["marker_rate"])
         client = self.env.world.client
+        control_dt = self.env.control_dt
+        start = time.monotonic()
+        sim_time = next_judge = next_camera = next_marker = 0.0
+        max_catch_up = 10 * self.substeps_per_tick  # beyond that, let simulated time slip
         while not rospy.is_shutdown():
             with self.lock:
                 if self.holding and time.monotonic() >= self.hold_until:
                     if 0 < self.max_episodes <= self.episode:
                         break
                     self._start_episode()
-                self.env.robot.command(self.arm_target, self.gripper_target, period=self.tick_physics_time)
-                for _ in range(self.substeps_per_tick):
+                    next_judge = sim_time
+                steps = 0
+                wall = time.monotonic() - start
+                while sim_time < wall - 0.5 * self.physics_dt and steps < max_catch_up:
+                    self.env.robot.command(self.arm_target, self.gripper_target, period=self.physics_dt)
                     p.stepSimulation(physicsClientId=client)
-                tick += 1
+                    sim_time += self.physics_dt
+                    steps += 1
+                    if not self.holding and sim_time >= next_judge + control_dt - 1e-9:
+                        next_judge += control_dt
+                        self._judge()
+                        self.tcp_path.append(tuple(self.env.tcp_position()))
+                if wall - sim_time > 1.0:  # hopelessly behind: resynchronise rather than race
+                    start += wall - sim_time
                 stamp = rospy.Time.now()
                 self._publish_joint_states(stamp)
-                if not self.holding and tick % self.ticks_per_control == 0:
-                    self._judge()
-                    self.tcp_path.append(tuple(self.env.tcp_position()))
-                if tick % camera_every == 0:
+                if sim_time >= next_camera:
+                    next_camera = sim_time + camera_period - 1e-9
                     self._publish_target(stamp)
-                if tick % marker_every == 0:
+                if sim_time >= next_marker:
+                    next_marker = sim_time + marker_period - 1e-9
                     self._publish_markers(stamp)
             try:
                 rate.sleep()

@@ -99,6 +99,15 @@ class Task:
         terms = self.terms(state)
         self._previous_potential = sum(self.weights[name] * value for name, value in terms.items())
 
+    @staticmethod
+    def common_failure(state: TaskState) -> Optional[str]:
+        """Failures every task shares: arm/palm collisions and leaving the workspace."""
+        if state.robot_table_contact or state.arm_object_contact:
+            return "collision"
+        if not state.tcp_in_workspace:
+            return "left_workspace"
+        return None
+
     # Shared shaping terms -------------------------------------------------------------
     def approach_term(self, state: TaskState) -> float:
         """-distance(tcp, object centre) / distance_scale."""

@@ -51,10 +51,9 @@ class GraspTask(Task):
 
     def judge(self, state: TaskState, control_dt: float) -> TaskOutcome:
         terms = self.terms(state)
-        if state.robot_table_contact or state.arm_object_contact:
-            return TaskOutcome(False, "collision", terms)
-        if not state.tcp_in_workspace:
-            return TaskOutcome(False, "left_workspace", terms)
+        failure = self.common_failure(state)
+        if failure is not None:
+            return TaskOutcome(False, failure, terms)
         if float(state.object_up_axis[2]) < self.max_tilt_cos:
             return TaskOutcome(False, "object_knocked_over", terms)
         xy = state.object_position[:2]

@@ -32,10 +32,9 @@ class ReachTask(Task):
 
     def judge(self, state: TaskState, control_dt: float) -> TaskOutcome:
         terms = self.terms(state)
-        if state.robot_table_contact or state.arm_object_contact:
-            return TaskOutcome(False, "collision", terms)
-        if not state.tcp_in_workspace:
-            return TaskOutcome(False, "left_workspace", terms)
+        failure = self.common_failure(state)
+        if failure is not None:
+            return TaskOutcome(False, failure, terms)
         success = (
             state.tcp_to_object_distance <= self.success_distance
             and -state.tcp_rotation[2, 2] >= self.min_down_cosine  # approach angle within limit

@@ -88,29 +88,45 @@ def summarise(records: List[Dict[str, Any]]) -> Dict[str, Any]:
 
 
 def plot_learning_curve(run_dir: Path, out: Path) -> Path:
-    """PNG of evaluation success rate and training episode return against steps."""
+    """PNG of a run's evaluation success against training experience.
+
+    RL runs (train.py): success and mean return of the evaluation callback against steps.
+    DAgger runs (imitate.py): the learner's evaluation success after each round against the
+    number of expert-labelled samples.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    data = np.load(run_dir / "eval" / "evaluations.npz")
-    steps = data["timesteps"]
-    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
-    if "successes" in data and len(data["successes"]):
-        ax[0].plot(steps, data["successes"].mean(axis=1) * 100.0, marker="o", ms=3)
-    ax[0].set(xlabel="environment steps", ylabel="evaluation success (%)", ylim=(-2, 102), title="success")
-    ax[0].grid(alpha=0.3)
-    ax[1].plot(steps, data["results"].mean(axis=1))
-    ax[1].set(xlabel="environment steps", ylabel="mean evaluation return", title="return")
-    ax[1].grid(alpha=0.3)
     summary_path = run_dir / "summary.json"
-    if summary_path.is_file():
-        summary = json.loads(summary_path.read_text())
+    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    machine = summary.get("machine", {})
+    if summary.get("method") == "dagger":
+        rounds = [h for h in summary["history"] if "eval_success" in h]
+        fig, ax = plt.subplots(1, 1, figsize=(6, 3.6))
+        ax.plot([h["samples"] for h in rounds], [100 * h["eval_success"] for h in rounds], marker="o")
+        for h in rounds:
+            ax.annotate(f"{h['wall_s'] / 60:.1f} min", (h["samples"], 100 * h["eval_success"]),
+                        textcoords="offset points", xytext=(0, -14), ha="center", fontsize=7)
+        ax.set(xlabel="expert-labelled samples (DAgger rounds)", ylabel="success (%), training env", ylim=(-2, 105))
+        ax.grid(alpha=0.3)
+        fig.suptitle(f"{summary.get('task')} / DAgger from the scripted expert, {machine.get('cores')} cores")
+    else:
+        data = np.load(run_dir / "eval" / "evaluations.npz")
+        steps = data["timesteps"]
+        fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+        if "successes" in data and len(data["successes"]):
+            ax[0].plot(steps, data["successes"].mean(axis=1) * 100.0, marker="o", ms=3)
+        ax[0].set(xlabel="environment steps", ylabel="evaluation success (%)", ylim=(-2, 102), title="success")
+        ax[0].grid(alpha=0.3)
+        ax[1].plot(steps, data["results"].mean(axis=1))
+        ax[1].set(xlabel="environment steps", ylabel="mean evaluation return", title="return")
+        ax[1].grid(alpha=0.3)
         if "time_to_solve_s" in summary:
             fig.suptitle(f"{summary.get('task')} / {summary.get('algo')}: solved "
                          f"({summary.get('target_success', 0.95):.0%}) after {summary['timesteps_to_solve']} steps, "
-                         f"{summary['time_to_solve_s'] / 60:.1f} min on {summary['machine']['cores']} cores")
+                         f"{summary['time_to_solve_s'] / 60:.1f} min on {machine.get('cores')} cores")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)

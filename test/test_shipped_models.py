@@ -1,0 +1,41 @@
+"""Quality gates on the committed models (not timings): they load, their ONNX graphs match
+SB3, their eval.json says what was measured, and they still solve their tasks here."""
+import json
+from pathlib import Path
+
+import pytest
+
+from fr5_rl.policy import load_policy
+from fr5_rl.training.evaluate import run_episodes
+from fr5_rl.training.export_onnx import parity
+
+MODELS = Path(__file__).resolve().parent.parent / "models"
+GATES = {"reach": (50, 0.90), "grasp": (30, 0.85)}  # episodes, minimum success rate
+
+
+@pytest.mark.parametrize("task", sorted(GATES))
+def test_shipped_model_directory_is_complete(task):
+    directory = MODELS / task
+    for name in ("model.zip", "vecnormalize.pkl", "model.onnx", "meta.json", "eval.json"):
+        assert (directory / name).is_file(), f"{directory / name} is missing"
+        assert (directory / name).stat().st_size < 10 * 1024 * 1024
+    report = json.loads((directory / "eval.json").read_text())
+    for key in ("success_rate", "success_rate_95ci", "episodes", "seeds", "training_steps", "machine", "algo"):
+        assert key in report, f"eval.json lacks {key}"
+    assert report["episodes"] >= 200 and report["task"] == task
+    assert report["success_rate_95ci"][0] <= report["success_rate"] <= report["success_rate_95ci"][1]
+
+
+@pytest.mark.parametrize("task", sorted(GATES))
+def test_shipped_model_still_solves_its_task(task):
+    episodes, minimum = GATES[task]
+    policy = load_policy(MODELS / task, "onnx", expected_task=task)
+    seeds = list(range(2_000_000, 2_000_000 + episodes))  # not the seeds eval.json used
+    records = run_episodes(task, {}, lambda env: (policy.act, None), seeds)
+    rate = sum(r["success"] for r in records) / episodes
+    assert rate >= minimum, f"{task}: {rate:.0%} over {episodes} episodes, gate {minimum:.0%}"
+
+
+@pytest.mark.parametrize("task", sorted(GATES))
+def test_shipped_onnx_matches_sb3(task):
+    assert parity(MODELS / task, 1000) <= 1e-5
