@@ -47,7 +47,9 @@ def test_package_xml_declares_what_the_nodes_import():
 
 def test_no_machine_specific_absolute_paths_in_tracked_files():
     files = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True).stdout.split()
-    pattern = re.compile(r"(/work/|/home/[a-z]+/|/root/|/farm/)")
+    # Assembled from pieces so that this file does not match itself.
+    roots = ("work", "root", "farm")
+    pattern = re.compile("|".join("/" + root + "/" for root in roots) + "|/home/[a-z]+/")
     offenders = []
     for name in files:
         path = ROOT / name
