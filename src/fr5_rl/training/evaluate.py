@@ -105,11 +105,15 @@ def plot_learning_curve(run_dir: Path, out: Path) -> Path:
     if summary.get("method") == "dagger":
         rounds = [h for h in summary["history"] if "eval_success" in h]
         fig, ax = plt.subplots(1, 1, figsize=(6, 3.6))
-        ax.plot([h["samples"] for h in rounds], [100 * h["eval_success"] for h in rounds], marker="o")
+        ax.plot([h["samples"] for h in rounds], [100 * h["eval_success"] for h in rounds], marker="o", label="task")
+        if any(h.get("eval_success_training_env") is not None for h in rounds):
+            ax.plot([h["samples"] for h in rounds], [100 * (h.get("eval_success_training_env") or 0) for h in rounds],
+                    marker="s", label="randomised training env")
+            ax.legend(loc="lower right", fontsize=8)
         for h in rounds:
             ax.annotate(f"{h['wall_s'] / 60:.1f} min", (h["samples"], 100 * h["eval_success"]),
                         textcoords="offset points", xytext=(0, -14), ha="center", fontsize=7)
-        ax.set(xlabel="expert-labelled samples (DAgger rounds)", ylabel="success (%), training env", ylim=(-2, 105))
+        ax.set(xlabel="expert-labelled samples (DAgger rounds)", ylabel="evaluation success (%)", ylim=(-2, 105))
         ax.grid(alpha=0.3)
         fig.suptitle(f"{summary.get('task')} / DAgger from the scripted expert, {machine.get('cores')} cores")
     else:

@@ -174,7 +174,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     rng = np.random.default_rng(args.seed)
 
     env = FR5Env(task=args.task, config=env_overrides)
-    eval_env = FR5Env(task=args.task, config=env_overrides)
+    # Each round is judged on the task as registered and, when training randomises, also on
+    # the training variant; the best round is the one with the highest sum of both.
+    eval_envs = {"task": FR5Env(task=args.task)}
+    if env_overrides:
+        eval_envs["training_env"] = FR5Env(task=args.task, config=env_overrides)
     expert = ScriptedExpert(env)
     observations, labels, expert_success = rollouts(env, expert, None, episodes, args.seed, 1.0, rng)
     print(f"round 0: expert demonstrations, {len(observations)} samples, expert success {expert_success:.0%}")
@@ -189,7 +193,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         loss = fit(model, normaliser, observations, labels, epochs, seed=args.seed + round_index,
                    learning_rate=float(dagger.get("learning_rate", 1e-3)))
         learner = make_learner(model, normaliser)
-        success = evaluate(eval_env, learner, args.eval_episodes, args.seed + EVAL_SEED_OFFSET)
+        rates = {name: evaluate(e, learner, args.eval_episodes, args.seed + EVAL_SEED_OFFSET)
+                 for name, e in eval_envs.items()}
+        success = sum(rates.values()) / len(rates)
         sync_stats(venv, normaliser)
         meta = {"task": args.task, "algo": "ppo", "trained_by": "dagger", "env_overrides": env_overrides,
                 "env_config": env.cfg, "robot_config": load_yaml("robot"),
@@ -201,12 +207,14 @@ def main(argv: Optional[List[str]] = None) -> int:
             save_model_dir(run_dir / "best", model, venv, meta)
         save_model_dir(run_dir / "final", model, venv, meta)
         history.append({"round": round_index, "samples": int(len(observations)), "fit_loss": loss,
-                        "eval_success": success, "wall_s": round(time.time() - t_start, 1)})
-        print(f"round {round_index}: {len(observations)} samples, loss {loss:.4f}, "
-              f"learner success {success:.0%} on {args.eval_episodes} episodes")
+                        "eval_success": rates["task"], "eval_success_training_env": rates.get("training_env"),
+                        "wall_s": round(time.time() - t_start, 1)})
+        print(f"round {round_index}: {len(observations)} samples, loss {loss:.4f}, learner success "
+              + ", ".join(f"{rate:.0%} ({name})" for name, rate in rates.items())
+              + f" on {args.eval_episodes} episodes")
         write_json_atomic(run_dir / "summary.json", {
             "task": args.task, "method": "dagger", "history": history, "best_round": best[1],
-            "best_eval_success": best[0], "wall_time_s": round(time.time() - t_start, 1),
+            "best_score": best[0], "wall_time_s": round(time.time() - t_start, 1),
             "machine": machine_description(), "seed": args.seed})
         if round_index == rounds:
             break
@@ -216,6 +224,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         observations = np.concatenate([observations, new_obs])
         labels = np.concatenate([labels, new_labels])
     env.close()
-    eval_env.close()
+    for e in eval_envs.values():
+        e.close()
     print(f"best round {best[1]}: success {best[0]:.0%}; run directory {run_dir}")
     return 0
