@@ -5,6 +5,8 @@
 set -euo pipefail
 episodes="${1:-5}"
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+# Runnable on its own too: enter the environment that tools/setup.sh made.
+set +u; source "$repo/env.sh"; set -u
 model="${MODEL:-models/reach}"
 task="$(python -c "import json,sys; print(json.load(open(sys.argv[1]))['task'])" "$repo/$model/meta.json")"
 if [ -n "${DISPLAY:-}" ] && [ -z "${CI:-}" ]; then

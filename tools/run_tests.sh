@@ -6,6 +6,8 @@
 # Ends with one line "tests: N passed, N failed" over both; exits non-zero if anything failed.
 set -uo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+# Runnable on its own too: enter the environment that tools/setup.sh made.
+set +u; source "$repo/env.sh"; set -u
 cd "$repo"
 results="$repo/.catkin_ws/test_results_all"
 rm -rf "$results" && mkdir -p "$results"

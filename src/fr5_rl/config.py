@@ -180,6 +180,10 @@ def validate_env_config(cfg: Mapping[str, Any], robot: RobotSpec) -> None:
                 f"{task}: simulation.physics_dt ({physics_dt}) must divide control_dt ({control_dt}) evenly"
             )
     control_dt = float(cfg["simulation"]["control_dt"])
+    for choice in cfg.get("randomisation", {}).get("physics_dt_choices") or []:
+        ratio = control_dt / float(choice)
+        if float(choice) <= 0 or abs(ratio - round(ratio)) > 1e-6:
+            raise ConfigError(f"randomisation.physics_dt_choices: {choice} must divide control_dt ({control_dt})")
     max_step = float(cfg["action"]["max_joint_step"])
     allowed = float(np.min(robot.velocity_limits)) * control_dt
     if not 0.0 < max_step <= allowed + 1e-12:

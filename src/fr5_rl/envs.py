@@ -60,6 +60,7 @@ class FR5Env(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
 
         sim_cfg = simulation_settings(self.cfg, task)
+        self._physics_dt = float(sim_cfg["physics_dt"])
         self.world = PyBulletWorld(sim_cfg, gui=render_mode == "human")
         self.world.add_table(self.cfg["table"])
         self.robot = FR5Robot(self.world.client, self.robot_spec, sim_cfg)
@@ -235,6 +236,12 @@ class FR5Env(gym.Env):
             self._object_rest_height = dims[0]
         self.world.set_object(str(obj["shape"]), dims, mass, friction)
         self.robot.set_joint_damping(rng.uniform(*rnd["joint_damping"]) if on else 0.0)
+        # The simulated position controller tracks differently at other physics steps: drawing
+        # the step per episode keeps a policy from relying on one simulator's exact response.
+        choices = rnd.get("physics_dt_choices") or []
+        physics_dt = float(rng.choice(choices)) if on and choices else self._physics_dt
+        if physics_dt != self.world.physics_dt:
+            self.world.set_physics_dt(physics_dt, self.control_dt)
         lo, hi = (int(v) for v in rnd["action_latency_steps"])
         self._latency_steps = int(rng.integers(lo, hi + 1)) if on else 0
         self._obs_noise_std = float(rnd["observation_noise_std"]) if on else 0.0

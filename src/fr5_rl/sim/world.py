@@ -114,6 +114,12 @@ class PyBulletWorld:
         return np.array(position), orientation
 
     # ------------------------------------------------------------------ physics
+    def set_physics_dt(self, physics_dt: float, control_dt: float) -> None:
+        """Change the physics step (s); the number of substeps per control step follows."""
+        self.physics_dt = float(physics_dt)
+        self.substeps = int(round(float(control_dt) / self.physics_dt))
+        p.setTimeStep(self.physics_dt, physicsClientId=self.client)
+
     def step(self) -> None:
         """Advance one control period (``substeps`` physics steps)."""
         for _ in range(self.substeps):
