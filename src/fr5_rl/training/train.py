@@ -191,6 +191,26 @@ def save_checkpoint(model, run_dir: Path, meta: Dict[str, Any]) -> None:
                    {**meta, "num_timesteps": int(model.num_timesteps)}, write_extra=write_replay_buffer)
 
 
+def close_vec_env(venv, interrupted: bool) -> None:
+    """Close a (VecNormalize-wrapped) vectorised env; after Ctrl-C, stop subprocess workers.
+
+    Ctrl-C can land while the trainer is collecting step results from the workers, half of
+    them read; a polite close would then wait for answers that never come. The workers hold
+    nothing worth saving, so they are terminated instead.
+    """
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    inner = getattr(venv, "venv", venv)
+    if interrupted and isinstance(inner, SubprocVecEnv):
+        for process in inner.processes:
+            process.terminate()
+        for process in inner.processes:
+            process.join(timeout=5)
+        inner.closed = True
+        return
+    venv.close()
+
+
 def parser_defaults() -> Dict[str, Any]:
     """Default value of every command-line option."""
     return vars(build_parser().parse_args([]))
@@ -326,7 +346,7 @@ def train(args: argparse.Namespace, t_start: float) -> int:
                     "wall_time_s": round(elapsed_before + time.time() - t_start, 1),
                     "finished": not interrupted})
     write_json_atomic(summary_path, summary)
-    venv.close()
+    close_vec_env(venv, interrupted)
     eval_env.close()
     print(f"train.py: {'stopped' if interrupted else 'done'} at {model.num_timesteps} steps; "
           f"run directory {run_dir}")
