@@ -9,7 +9,7 @@ observation noise, latency and mass/friction randomisation can be on while it le
 
 The result is an ordinary model directory (SB3 PPO ``model.zip`` whose actor holds the learned
 weights, ``vecnormalize.pkl`` with the data set's statistics, ``meta.json``), so evaluate.py,
-export_onnx.py, the ROS node and ``train.py --init-model`` (PPO fine-tuning) all take it.
+export_onnx.py and the ROS node take it like any trained model.
 """
 from __future__ import annotations
 
