@@ -120,10 +120,8 @@ class FR5Robot:
     def joint_state(self) -> Tuple[np.ndarray, np.ndarray, float]:
         """Measured arm positions (rad), velocities (rad/s) and gripper opening width (m)."""
         states = p.getJointStates(self.body, self.all_joints, physicsClientId=self.client)
-        positions = np.array([s[0] for s in states[:6]])
-        velocities = np.array([s[1] for s in states[:6]])
-        width = states[6][0] + states[7][0]
-        return positions, velocities, float(width)
+        table = np.array([state[:2] for state in states])  # (8, 2): position, velocity
+        return table[:6, 0], table[:6, 1], float(table[6, 0] + table[7, 0])
 
     def tcp_pose_from_simulator(self) -> Tuple[np.ndarray, np.ndarray]:
         """tcp position (m) and 3x3 rotation in base_link, as the simulator computes them.

@@ -1,6 +1,7 @@
 """What every task shares: the state it judges, its outcome, the shaped reward."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, Dict, Mapping, Optional
 
@@ -119,7 +120,7 @@ class Task:
         Linear in the angle rather than the seed's cosine: a cosine is flat near zero tilt and
         gives no push to correct the last 10-20 degrees, which is exactly what success needs.
         """
-        return -float(np.arccos(min(max(-state.tcp_rotation[2, 2], -1.0), 1.0))) / self.orientation_scale
+        return -math.acos(min(max(-float(state.tcp_rotation[2, 2]), -1.0), 1.0)) / self.orientation_scale
 
     def gripper_term(self, state: TaskState, wanted_width: float) -> float:
         """-|measured width - wanted width| / max opening width."""
