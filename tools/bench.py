@@ -216,19 +216,27 @@ def time_calls(act, observations: np.ndarray, calls: int, warmup: int = 200) -> 
             "p99_ms": float(np.percentile(ms, 99)), "mean_ms": float(ms.mean()), "max_ms": float(ms.max())}
 
 
+def display_path(path: Path) -> str:
+    """A path relative to the repository when inside it: results carry no machine paths."""
+    try:
+        return str(Path(path).resolve().relative_to(REPO))
+    except ValueError:
+        return str(path)
+
+
 def bench_inference(model_dir: Optional[Path], calls: int) -> Dict[str, Any]:
     if model_dir is None or not model_dir.is_dir():
         return {"skipped": True, "reason": f"no model directory at {model_dir}"}
     from fr5_rl.policy import load_policy
     from fr5_rl.training.artifacts import ONNX_FILE, ModelFilesError
 
-    result: Dict[str, Any] = {"model_dir": str(model_dir), "backends": {}}
+    result: Dict[str, Any] = {"model_dir": display_path(model_dir), "backends": {}}
     work = model_dir
     tmp = None
     try:
         torch_policy = load_policy(model_dir, "torch")
     except ModelFilesError as error:
-        return {"skipped": True, "reason": str(error), "model_dir": str(model_dir)}
+        return {"skipped": True, "reason": str(error), "model_dir": display_path(model_dir)}
     observations = rollout_observations(torch_policy.task, torch_policy.meta.get("env_overrides", {}),
                                         min(calls, 2000))
     result.update({"task": torch_policy.task, "algo": torch_policy.meta.get("algo"),
