@@ -36,7 +36,7 @@ class TaskOutcome:
 
 def approach_angle(tcp_rotation: np.ndarray) -> float:
     """Angle (rad) between the tcp z axis (approach direction) and straight down (-z)."""
-    return float(np.arccos(np.clip(-tcp_rotation[2, 2], -1.0, 1.0)))
+    return math.acos(min(max(-float(tcp_rotation[2, 2]), -1.0), 1.0))
 
 
 class Task:
@@ -120,7 +120,7 @@ class Task:
         Linear in the angle rather than the seed's cosine: a cosine is flat near zero tilt and
         gives no push to correct the last 10-20 degrees, which is exactly what success needs.
         """
-        return -math.acos(min(max(-float(state.tcp_rotation[2, 2]), -1.0), 1.0)) / self.orientation_scale
+        return -approach_angle(state.tcp_rotation) / self.orientation_scale
 
     def gripper_term(self, state: TaskState, wanted_width: float) -> float:
         """-|measured width - wanted width| / max opening width."""
