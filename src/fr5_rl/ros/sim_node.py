@@ -66,6 +66,9 @@ class SimulatorNode:
         self.results = []
         self.max_episodes = int(params["episodes"])
         self.tcp_path: deque = deque(maxlen=300)
+        # Episodes are timed from the first command on: a policy node still loading its model
+        # must not lose its first episode to the step limit.
+        self.commanded = False
 
         self.joint_pub = rospy.Publisher(params["joint_states_topic"], JointState, queue_size=10)
         self.target_pub = rospy.Publisher(params["target_topic"], PoseStamped, queue_size=10)
@@ -89,6 +92,7 @@ class SimulatorNode:
         if not np.array_equal(clamped, values):
             rospy.logwarn_throttle(1.0, "sim_node: arm command outside the joint limits was clamped")
         with self.lock:
+            self.commanded = True
             if not self.holding:
                 self.arm_target = clamped
 
@@ -229,7 +233,9 @@ class SimulatorNode:
                     p.stepSimulation(physicsClientId=client)
                     sim_time += self.physics_dt
                     steps += 1
-                    if not self.holding and sim_time >= next_judge + control_dt - 1e-9:
+                    if not self.commanded:
+                        next_judge = sim_time
+                    elif not self.holding and sim_time >= next_judge + control_dt - 1e-9:
                         next_judge += control_dt
                         self._judge()
                         self.tcp_path.append(tuple(self.env.tcp_position()))
