@@ -27,10 +27,11 @@ summary = json.loads((run_dir / "summary.json").read_text())
 args.target.mkdir(parents=True, exist_ok=True)
 for name in (MODEL_FILE, STATS_FILE):
     shutil.copy2(args.source / name, args.target / name)
-for key in ("wall_time_s", "time_to_solve_s", "timesteps_to_solve", "machine", "n_envs", "method", "best_round"):
-    if key in summary:
-        meta[f"training_{key}" if not key.startswith("time") and key != "machine" else key] = summary[key]
-meta["training_wall_time_s"] = summary.get("wall_time_s")
+# summary.json key -> meta.json key (what evaluate.py copies into eval.json)
+FROM_SUMMARY = {"wall_time_s": "training_wall_time_s", "time_to_solve_s": "time_to_solve_s",
+                "timesteps_to_solve": "timesteps_to_solve", "machine": "machine", "method": "training_method",
+                "best_round": "training_best_round"}
+meta.update({target: summary[key] for key, target in FROM_SUMMARY.items() if key in summary})
 meta["source_run"] = run_dir.name
 write_json_atomic(args.target / META_FILE, meta)
 if export_onnx.main([str(args.target), "--check", "1000"]) != 0:

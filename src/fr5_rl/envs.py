@@ -76,7 +76,7 @@ class FR5Env(gym.Env):
         self._latency_steps = 0
         self._obs_noise_std = 0.0
         self._steps = 0
-        self._measured_joint_positions = self.robot_spec.home_joint_positions.copy()
+        self._state: Optional[TaskState] = None  # the last one observed
         self._workspace = (tuple(self.cfg["workspace"]["low"]), tuple(self.cfg["workspace"]["high"]))
         self._object_cfg = obj
 
@@ -115,7 +115,7 @@ class FR5Env(gym.Env):
         np.maximum(action, -1.0, out=action)
         applied = self._delayed(action)
         # The joint state measured by the last observation is still current: nothing moved since.
-        targets = self.shaper.arm_targets(applied, self._measured_joint_positions)
+        targets = self.shaper.arm_targets(applied, self._state.joint_positions)
         self._gripper_command_width = self.shaper.gripper_width(applied)
         self.robot.command(targets, self._gripper_command_width)
         self.world.step()
@@ -154,6 +154,11 @@ class FR5Env(gym.Env):
         """Object centre in the world (= base_link) frame, metres."""
         return self.world.object_pose()[0]
 
+    @property
+    def gripper_command_width(self) -> float:
+        """Opening width (m) the last action commanded."""
+        return self._gripper_command_width
+
     def joint_positions(self) -> np.ndarray:
         """Measured arm joint angles (rad), controller order."""
         return self.robot.joint_state()[0]
@@ -173,7 +178,6 @@ class FR5Env(gym.Env):
     def task_state(self) -> TaskState:
         """Ground-truth state the task judges (also used by the ROS simulator node)."""
         q, qd, width = self.robot.joint_state()
-        self._measured = (q, qd, width)
         tcp_position, tcp_rotation = self.robot.tcp_pose_from_simulator()
         object_position, object_quaternion = self.world.object_pose()
         table, obj, finger_links = self.world.table_id, self.world.object_id, self.robot.finger_links
@@ -190,7 +194,7 @@ class FR5Env(gym.Env):
         x, y, z = tcp_position
         (x_low, y_low, z_low), (x_high, y_high, z_high) = self._workspace
         return TaskState(
-            tcp_position=tcp_position, tcp_rotation=tcp_rotation, gripper_width=width,
+            joint_positions=q, joint_velocities=qd, tcp_position=tcp_position, tcp_rotation=tcp_rotation, gripper_width=width,
             tcp_to_object_distance=math.dist(object_position, tcp_position),
             object_position=object_position, object_up_axis=p.getMatrixFromQuaternion(object_quaternion)[2::3],
             object_start_position=self._object_start, robot_table_contact=table_contact,
@@ -199,9 +203,8 @@ class FR5Env(gym.Env):
         )
 
     def _observe(self) -> Tuple[TaskState, np.ndarray]:
-        state = self.task_state()
-        q, qd, width = self._measured
-        self._measured_joint_positions = q
+        self._state = state = self.task_state()
+        q, qd, width = state.joint_positions, state.joint_velocities, state.gripper_width
         tcp_position, tcp_rotation, object_position = state.tcp_position, state.tcp_rotation, state.object_position
         if self._obs_noise_std > 0.0:
             rng = self.np_random

@@ -52,17 +52,16 @@ class ScriptedExpert:
     def act(self, observation: Optional[np.ndarray] = None) -> np.ndarray:
         """Next action in [-1, 1]^7 (the observation is unused: the expert reads the simulator)."""
         env = self.env
-        q, _, _ = env.robot.joint_state()
-        tcp, _ = env.kinematics.tcp_pose(q)
-        obj = env.object_position()
+        state = env.task_state()
+        q, tcp, obj = state.joint_positions, state.tcp_position, state.object_position
         grasp = env.task.name == "grasp"
         grasp_point = obj + np.array([0.0, 0.0, self.grasp_height_offset if grasp else 0.0])
         horizontal_error = float(np.linalg.norm((grasp_point - tcp)[:2]))
-        held = grasp and env.task_state().fingers_object_contact == 2 and \
-            self.env._gripper_command_width < env.robot_spec.max_opening_width / 2.0
+        held = grasp and state.fingers_object_contact == 2 and \
+            env.gripper_command_width < env.robot_spec.max_opening_width / 2.0
         if held:
             self.phase, target = "lift", obj + np.array([0.0, 0.0, self.lift_clearance])
-            target[2] = env._object_start[2] + self.grasp_height_offset + self.lift_clearance
+            target[2] = state.object_start_position[2] + self.grasp_height_offset + self.lift_clearance
         elif grasp and np.linalg.norm(grasp_point - tcp) < self.at_grasp_tolerance:
             self.phase, target = "close", grasp_point
         elif horizontal_error < self.align_tolerance + 0.5 * max(tcp[2] - grasp_point[2], 0.0):

@@ -61,7 +61,7 @@ def load_static_transforms(path: str | Path = "static_transforms") -> List[Dict]
             parent, child = str(item["parent"]), str(item["child"])
             xyz, rpy = [float(v) for v in item["xyz"]], [float(v) for v in item["rpy"]]
         except (KeyError, TypeError, ValueError) as error:
-            raise ConfigError(f"static_transforms entry {index} needs parent, child, xyz[3], rpy[3]: {error}")
+            raise ConfigError(f"static_transforms entry {index} needs parent, child, xyz[3], rpy[3]: {error}") from None
         if len(xyz) != 3 or len(rpy) != 3 or not np.all(np.isfinite(xyz + rpy)):
             raise ConfigError(f"static_transforms entry {index} ({parent} -> {child}): xyz and rpy need 3 finite values")
         entries.append({"parent": parent, "child": child, "xyz": xyz, "rpy": rpy,

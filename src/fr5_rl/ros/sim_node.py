@@ -23,7 +23,6 @@ import sys
 import threading
 import time
 from collections import deque
-from typing import Optional
 
 import numpy as np
 import pybullet as p

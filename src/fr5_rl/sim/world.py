@@ -125,10 +125,6 @@ class PyBulletWorld:
         for _ in range(self.substeps):
             p.stepSimulation(physicsClientId=self.client)
 
-    def contacts(self, body_a: int, body_b: int) -> list:
-        """Contact points between two bodies found by the last physics step."""
-        return p.getContactPoints(bodyA=body_a, bodyB=body_b, physicsClientId=self.client)
-
     def render(self, width: int = 480, height: int = 360, target=(-0.45, 0.0, 0.15)) -> np.ndarray:
         """RGB image (H, W, 3) uint8 from a fixed camera, headless TinyRenderer."""
         view = p.computeViewMatrixFromYawPitchRoll(

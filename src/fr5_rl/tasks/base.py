@@ -12,6 +12,8 @@ import numpy as np
 class TaskState:
     """Everything a task needs to judge one control step (base_link frame, SI units)."""
 
+    joint_positions: np.ndarray  # (6,) rad, measured, controller order
+    joint_velocities: np.ndarray  # (6,) rad/s
     tcp_position: np.ndarray  # (3,) m
     tcp_rotation: np.ndarray  # (3, 3)
     gripper_width: float  # m, measured opening

@@ -14,7 +14,6 @@ export_onnx.py and the ROS node take it like any trained model.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -22,7 +21,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from ..config import load_env_config, load_yaml
+from ..config import load_yaml
 from .artifacts import save_model_dir, write_json_atomic
 from .train import EVAL_SEED_OFFSET, machine_description
 
