@@ -38,7 +38,7 @@ def inputs(**changes) -> ObservationInputs:
         gripper_width=MAX_WIDTH / 2.0,
         gripper_command_width=MAX_WIDTH / 2.0,
         tcp_position=(TCP_LOW + TCP_HIGH) / 2.0,
-        tcp_rotation=DOWN.copy(),
+        tcp_approach_axis=DOWN[:, 2].copy(),
         object_position=(TCP_LOW + TCP_HIGH) / 2.0,
         object_lift=0.0,
     )
@@ -112,7 +112,7 @@ def test_approach_axis_is_third_rotation_column(reach_builder):
     angle = 0.3
     c, s = np.cos(angle), np.sin(angle)
     rotation = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]) @ DOWN
-    obs = reach_builder.build(inputs(tcp_rotation=rotation))
+    obs = reach_builder.build(inputs(tcp_approach_axis=rotation[:, 2]))
     np.testing.assert_allclose(obs[17:20], rotation[:, 2], atol=1e-6)
 
 

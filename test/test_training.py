@@ -84,7 +84,14 @@ def start_training(command_prefix, run_dir: Path, hyperparams: Path, timesteps: 
             "--hyperparams", str(hyperparams), "--checkpoint-freq", "1000", "--eval-freq", "1000000",
             "--eval-episodes", "1", "--no-progress", "--run-dir", str(run_dir), *extra]
     return subprocess.Popen(args, cwd=REPO, env=subprocess_env(), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=new_session)
+                            stderr=subprocess.PIPE, text=True, start_new_session=new_session,
+                            preexec_fn=default_sigint)
+
+
+def default_sigint() -> None:
+    """Children of a background job inherit an ignored SIGINT (and Python then installs no
+    KeyboardInterrupt handler); give the trainer the disposition an interactive user has."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def wait_for_checkpoint(proc: subprocess.Popen, run_dir: Path, timeout: float = 45.0) -> int:

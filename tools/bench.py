@@ -10,9 +10,14 @@ Environment speed, for FR5Reach-v0 and FR5Grasp-v0 in one process: random action
 steps are not), median of the repeats:
 
 - env steps/s and the real-time factor (steps * control_dt / wall seconds);
-- overhead over bare PyBullet: the env's time per step divided by (substeps x the time of
-  one bare ``pybullet.stepSimulation``) of the same world, measured in the same process right
-  after each env repeat, starting from the state right after ``reset``.
+- overhead over bare PyBullet: the env's time divided by the time bare PyBullet takes for
+  the same physics. Every command the env sent is recorded (an untimed second run: episodes
+  are seeded one by one, so it is the same run) and replayed on the same world, per control
+  step one ``setJointMotorControlArray`` and ``substeps`` ``stepSimulation`` calls, nothing
+  else; the replay ends with the joints the env ended with (the deviation is reported). The
+  env's time includes its resets, the replay's does not;
+- for comparison, ``stepSimulation`` of the scene at rest right after a reset (nothing moves,
+  the object sleeps), which is cheaper than the moving scene the env simulates.
 
 Inference latency of a model directory (default models/reach; skipped when absent): p50/p99
 of single-observation ``Policy.act`` calls through ``fr5_rl.policy.load_policy`` for the torch
@@ -74,23 +79,103 @@ def verdict(ok: bool) -> str:
 
 
 # ----------------------------------------------------------------------------- env speed
-def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0) -> Dict[str, Any]:
+def run_seeded_episodes(env, actions: np.ndarray, first_seed: int) -> List[int]:
+    """Step ``env`` through ``actions``, resetting with seeds first_seed, first_seed + 1, ...
+    whenever an episode ends; returns the seeds used. Every start is reproducible, which is
+    what lets the bare replay rebuild it."""
+    seeds = [first_seed]
+    step, reset = env.step, env.reset
+    reset(seed=first_seed)
+    for action in actions:
+        _, _, terminated, truncated, _ = step(action)
+        if terminated or truncated:
+            seeds.append(seeds[-1] + 1)
+            reset(seed=seeds[-1])
+    return seeds
+
+
+def record_episodes(env, actions: np.ndarray, first_seed: int) -> List[Dict[str, Any]]:
+    """The same run as :func:`run_seeded_episodes`, untimed, recording every arm and gripper
+    command the env sends and the joint angles each episode ends with."""
+    robot = env.robot
+    original = robot.command
+    episodes: List[Dict[str, Any]] = []
+
+    def recording(joint_targets, opening_width, period=None):
+        episodes[-1]["commands"].append((list(joint_targets), opening_width))
+        original(joint_targets, opening_width, period)
+
+    original_reset = env.reset
+
+    def reset(seed=None, options=None):
+        if episodes:
+            episodes[-1]["final_joint_positions"] = env.joint_positions()
+        episodes.append({"seed": seed, "commands": []})
+        result = original_reset(seed=seed, options=options)
+        episodes[-1]["commands"].clear()  # reset's own hold command: the replay's reset sends it
+        return result
+
+    robot.command, env.reset = recording, reset
+    try:
+        run_seeded_episodes(env, actions, first_seed)
+        episodes[-1]["final_joint_positions"] = env.joint_positions()
+    finally:
+        del robot.command, env.reset  # back to the class methods
+    return episodes
+
+
+def replay_bare(env, episodes: List[Dict[str, Any]]) -> Dict[str, float]:
+    """Bare PyBullet doing the env's physics: per control step one motor command and
+    ``substeps`` ``stepSimulation`` calls, nothing else. Each episode's start is rebuilt with
+    the env's own seeded reset (not timed). Returns the timed seconds and how far the replayed
+    joints ended from the env's (rad), which shows the replay is the same motion."""
     import pybullet as p
 
+    client, substeps = env.world.client, env.world.substeps
+    command, step_simulation, perf = env.robot.command, p.stepSimulation, time.perf_counter
+    seconds, deviation = 0.0, 0.0
+    for episode in episodes:
+        env.reset(seed=episode["seed"])
+        commands = episode["commands"]
+        t0 = perf()
+        for joint_targets, opening_width in commands:
+            command(joint_targets, opening_width)
+            for _ in range(substeps):
+                step_simulation(physicsClientId=client)
+        seconds += perf() - t0
+        deviation = max(deviation, float(np.max(np.abs(env.joint_positions() - episode["final_joint_positions"]))))
+    return {"seconds": seconds, "max_final_joint_deviation_rad": deviation}
+
+
+def resting_step_seconds(env, steps: int, seed: int) -> float:
+    """``stepSimulation`` of the scene right after a reset with nothing moving (the arm holds
+    its start, the object sleeps): the floor the physics engine has, shown for comparison."""
+    import pybullet as p
+
+    client = env.world.client
+    env.reset(seed=seed)
+    state = p.saveState(physicsClientId=client)
+    step_simulation, perf = p.stepSimulation, time.perf_counter
+    t0 = perf()
+    for _ in range(steps * env.world.substeps):
+        step_simulation(physicsClientId=client)
+    seconds = perf() - t0
+    p.restoreState(stateId=state, physicsClientId=client)
+    p.removeState(state, physicsClientId=client)
+    return seconds
+
+
+def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0) -> Dict[str, Any]:
     import fr5_rl  # noqa: F401  (registers the environments)
     from fr5_rl.envs import FR5Env
 
     task = {"FR5Reach-v0": "reach", "FR5Grasp-v0": "grasp"}[env_id]
     env = FR5Env(task=task)
-    client, substeps = env.world.client, env.world.substeps
+    substeps = env.world.substeps
     rng = np.random.default_rng(seed)
     actions = rng.uniform(-1.0, 1.0, size=(steps + warmup, 7)).astype(np.float32)
-    perf = time.perf_counter
+    timed_actions = actions[warmup:]
 
-    env_seconds: List[float] = []
-    bare_seconds: List[float] = []
-    physics_in_env: List[float] = []
-    episodes: List[int] = []
     # Time spent in the world's physics stepping during env.step (diagnostic: the rest of the
     # step is Python, observation and task code). Costs two perf_counter calls per step.
     world_step = env.world.step
@@ -101,56 +186,41 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0)
         world_step()
         physics_clock[0] += time.perf_counter() - t
 
-    env.world.step = timed_world_step
+    per_repeat = []
     for repeat in range(repeats):
-        env.reset(seed=seed + 1000 * repeat)
-        for action in actions[:warmup]:  # warm-up, not timed
-            _, _, terminated, truncated, _ = env.step(action)
-            if terminated or truncated:
-                env.reset()
-        env.reset(seed=seed + 1000 * repeat + 1)
-        done_count = 0
+        first_seed = seed + 100_000 * repeat
+        run_seeded_episodes(env, actions[:warmup], first_seed + 50_000)  # warm-up, not timed
+        env.world.step = timed_world_step
         physics_clock[0] = 0.0
-        step = env.step
-        reset = env.reset
-        t0 = perf()
-        for action in actions[warmup:]:
-            _, _, terminated, truncated, _ = step(action)
-            if terminated or truncated:
-                reset()
-                done_count += 1
-        env_seconds.append(perf() - t0)
-        physics_in_env.append(physics_clock[0])
-        episodes.append(done_count)
+        t0 = time.perf_counter()
+        seeds = run_seeded_episodes(env, timed_actions, first_seed)
+        env_s = time.perf_counter() - t0
+        physics_s = physics_clock[0]
+        del env.world.step
 
-        # Bare PyBullet: the same world, as it is right after reset, same number of substeps.
-        env.reset(seed=seed + 1000 * repeat + 1)
-        state = p.saveState(physicsClientId=client)
-        for _ in range(warmup * substeps):
-            p.stepSimulation(physicsClientId=client)
-        p.restoreState(stateId=state, physicsClientId=client)
-        step_simulation = p.stepSimulation
-        t0 = perf()
-        for _ in range(steps * substeps):
-            step_simulation(physicsClientId=client)
-        bare_seconds.append(perf() - t0)
-        p.removeState(state, physicsClientId=client)
+        episodes = record_episodes(env, timed_actions, first_seed)
+        if [e["seed"] for e in episodes] != seeds or sum(len(e["commands"]) for e in episodes) != steps:
+            raise RuntimeError("the recording run differs from the timed run: the environment is not deterministic")
+        replay = replay_bare(env, episodes)
+        resting_s = resting_step_seconds(env, steps, first_seed)
+        per_repeat.append({
+            "env_seconds": round(env_s, 4),
+            "episodes": len(seeds),
+            "steps_per_s": steps / env_s,
+            "real_time_factor": steps * env.control_dt / env_s,
+            "env_step_us": 1e6 * env_s / steps,
+            "physics_in_env_step_us": 1e6 * physics_s / steps,
+            "python_in_env_step_us": 1e6 * (env_s - physics_s) / steps,
+            "bare_replay_seconds": round(replay["seconds"], 4),
+            "bare_replay_step_us": 1e6 * replay["seconds"] / steps,
+            "bare_replay_max_final_joint_deviation_rad": replay["max_final_joint_deviation_rad"],
+            "overhead": env_s / replay["seconds"],
+            "resting_physics_substep_us": 1e6 * resting_s / (steps * substeps),
+            "overhead_over_resting_scene": env_s / resting_s,
+        })
 
     control_dt = env.control_dt
     env.close()
-    per_repeat = []
-    for env_s, bare_s, physics_s in zip(env_seconds, bare_seconds, physics_in_env):
-        per_repeat.append({
-            "physics_in_env_step_us": 1e6 * physics_s / steps,
-            "python_in_env_step_us": 1e6 * (env_s - physics_s) / steps,
-            "env_seconds": round(env_s, 4),
-            "steps_per_s": steps / env_s,
-            "real_time_factor": steps * control_dt / env_s,
-            "bare_seconds": round(bare_s, 4),
-            "bare_physics_step_us": 1e6 * bare_s / (steps * substeps),
-            "env_step_us": 1e6 * env_s / steps,
-            "overhead": (env_s / steps) / (substeps * bare_s / (steps * substeps)),
-        })
 
     def median(key: str) -> float:
         return float(statistics.median(r[key] for r in per_repeat))
@@ -164,14 +234,15 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0)
         "warmup_steps": warmup,
         "control_dt": control_dt,
         "substeps": substeps,
-        "episodes_per_repeat": episodes,
         "steps_per_s": median("steps_per_s"),
         "real_time_factor": rtf,
         "env_step_us": median("env_step_us"),
-        "bare_physics_step_us": median("bare_physics_step_us"),
-        "overhead": overhead,
         "physics_in_env_step_us": median("physics_in_env_step_us"),
         "python_in_env_step_us": median("python_in_env_step_us"),
+        "bare_replay_step_us": median("bare_replay_step_us"),
+        "overhead": overhead,
+        "resting_physics_substep_us": median("resting_physics_substep_us"),
+        "overhead_over_resting_scene": median("overhead_over_resting_scene"),
         "per_repeat": per_repeat,
         "targets": {
             "real_time_factor_min": TARGETS[env_id]["real_time_factor"],
@@ -301,21 +372,24 @@ def write_summary(results_dir: Path) -> Path:
 
 def print_env_table(rows: List[Dict[str, Any]]) -> None:
     header = (f"{'environment':<13} {'steps/s':>9} {'x real time':>12} {'target':>7}  "
-              f"{'env step':>9} {'bare step':>10} {'overhead':>9} {'target':>7}")
+              f"{'env step':>9} {'bare replay':>12} {'overhead':>9} {'target':>7}")
     print(header)
     print("-" * len(header))
     for r in rows:
         t = r["targets"]
         print(f"{r['env_id']:<13} {r['steps_per_s']:>9.0f} {r['real_time_factor']:>11.1f}x "
-              f"{t['real_time_factor']:>7}  {r['env_step_us']:>7.0f}us {r['bare_physics_step_us']:>8.1f}us "
+              f"{t['real_time_factor']:>7}  {r['env_step_us']:>7.0f}us {r['bare_replay_step_us']:>10.0f}us "
               f"{r['overhead']:>8.2f}x {t['overhead']:>7}")
     for r in rows:
-        print(f"{r['env_id']}: of {r['env_step_us']:.0f}us per env step, {r['physics_in_env_step_us']:.0f}us are "
-              f"physics (world.step, {r['substeps']} substeps of a moving arm) and "
-              f"{r['python_in_env_step_us']:.0f}us the rest (commands, state queries, observation, task)")
+        print(f"{r['env_id']}: of {r['env_step_us']:.0f}us per env step (resets included), "
+              f"{r['physics_in_env_step_us']:.0f}us are physics ({r['substeps']} substeps) and "
+              f"{r['python_in_env_step_us']:.0f}us the rest (commands, state queries, observation, task, resets); "
+              f"the resting scene steps in {r['resting_physics_substep_us']:.0f}us per substep "
+              f"({r['overhead_over_resting_scene']:.2f}x)")
     print(f"targets: reach >= {TARGETS['FR5Reach-v0']['real_time_factor']:.0f}x real time, grasp >= "
           f"{TARGETS['FR5Grasp-v0']['real_time_factor']:.0f}x, overhead <= {TARGETS['overhead_max']}x "
-          f"(env step / (substeps x bare stepSimulation)); median of repeats")
+          "(env time / time of bare PyBullet replaying the same commands: one motor call and the "
+          "substeps per control step); median of repeats")
 
 
 def print_inference_table(result: Dict[str, Any]) -> None:

@@ -7,7 +7,7 @@ command mapped to an opening width in [0, max opening width] (m).
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from typing import Any, List, Mapping, Sequence
 
 import numpy as np
 
@@ -22,52 +22,72 @@ class JointCommandShaper:
     Increments are applied to the *measured* joint positions, so a lagging or blocked arm
     never accumulates a runaway target. Every target it returns is finite, inside the FR5
     joint limits, and within ``velocity_limit * control_dt`` of the measured position.
+
+    The arithmetic runs on plain floats: for six joints that is several times faster than
+    numpy's per-call overhead, and it runs in every simulated step.
     """
 
     def __init__(self, robot: RobotSpec, action_cfg: Mapping[str, Any], control_dt: float) -> None:
         self._max_step = float(action_cfg["max_joint_step"])
         self._alpha = float(action_cfg["smoothing_alpha"])
-        self._step_limit = robot.velocity_limits * float(control_dt)
-        self._lower, self._upper = robot.lower_limits, robot.upper_limits
+        self._n_joints = len(robot.joint_names)
+        self._step_limit = (robot.velocity_limits * float(control_dt)).tolist()
+        self._lower, self._upper = robot.lower_limits.tolist(), robot.upper_limits.tolist()
         self._max_width = robot.max_opening_width
-        self._filtered_step = np.zeros(len(robot.joint_names))
+        self._filtered_step = [0.0] * self._n_joints
 
     def reset(self) -> None:
         """Forget the low-pass filter state (start of an episode, or after a hold)."""
-        self._filtered_step[:] = 0.0
+        self._filtered_step = [0.0] * self._n_joints
 
-    def arm_targets(self, action: np.ndarray, measured_joint_positions: np.ndarray) -> np.ndarray:
-        """Joint position targets (rad, controller order) for the next control period."""
-        action = np.asarray(action, dtype=np.float64)
-        measured = np.asarray(measured_joint_positions, dtype=np.float64)
-        if action.shape != (ACTION_SIZE,) or measured.shape != self._lower.shape:
-            raise ValueError(
-                f"expected an action of shape ({ACTION_SIZE},) and {self._lower.shape[0]} joint "
-                f"positions, got {action.shape} and {measured.shape}"
-            )
+    def arm_targets(self, action: Sequence[float], measured_joint_positions: Sequence[float]) -> np.ndarray:
+        """Joint position targets (rad, controller order) for the next control period.
+
+        Raises ValueError for an action that is not 7 finite values or measured joint
+        positions that are not 6 finite values.
+        """
+        return np.array(self.arm_target_list(action, measured_joint_positions))
+
+    def arm_target_list(self, action: Sequence[float], measured_joint_positions: Sequence[float]) -> List[float]:
+        """:meth:`arm_targets` as a list of floats (what PyBullet and ROS messages take)."""
+        action = self._float_list(action, ACTION_SIZE, "an action")
+        measured = self._float_list(measured_joint_positions, self._n_joints, "measured joint positions")
         # One sum is finite exactly when every term is (overflowing input is refused too).
-        if not math.isfinite(action.sum() + measured.sum()):
+        if not math.isfinite(sum(action) + sum(measured)):
             raise ValueError("action or measured joint positions contain NaN or inf")
-        step = np.minimum(action[:6], 1.0)
-        np.maximum(step, -1.0, out=step)
-        step *= self._alpha * self._max_step
-        step += (1.0 - self._alpha) * self._filtered_step
-        np.minimum(step, self._step_limit, out=step)
-        np.maximum(step, -self._step_limit, out=step)
-        targets = measured + step
-        np.minimum(targets, self._upper, out=targets)
-        np.maximum(targets, self._lower, out=targets)
-        self._filtered_step = step
+        gain, keep = self._alpha * self._max_step, 1.0 - self._alpha
+        filtered, targets = [], []
+        # Conditional expressions rather than min/max calls: this loop runs in every step.
+        for value, previous, limit, lower, upper, position in zip(
+                action, self._filtered_step, self._step_limit, self._lower, self._upper, measured):
+            value = 1.0 if value > 1.0 else (-1.0 if value < -1.0 else value)
+            step = gain * value + keep * previous
+            step = limit if step > limit else (-limit if step < -limit else step)
+            filtered.append(step)
+            target = position + step
+            targets.append(upper if target > upper else (lower if target < lower else target))
+        self._filtered_step = filtered
         return targets
 
-    def gripper_width(self, action: np.ndarray) -> float:
+    @staticmethod
+    def _float_list(values: Sequence[float], size: int, what: str) -> List[float]:
+        if type(values) is not list:  # arrays, tuples: check the shape through numpy once
+            array = np.asarray(values, dtype=np.float64)
+            if array.shape != (size,):
+                raise ValueError(f"expected {what} of shape ({size},), got {array.shape}")
+            return array.tolist()
+        if len(values) != size:
+            raise ValueError(f"expected {what} of {size} values, got {len(values)}")
+        return values
+
+    def gripper_width(self, action: Sequence[float]) -> float:
         """Commanded opening width (m) from the action's last component (-1 closed, +1 open)."""
         value = float(action[ACTION_SIZE - 1])
-        if not np.isfinite(value):
+        if not math.isfinite(value):
             raise ValueError("gripper action is NaN or inf")
         value = min(max(value, -1.0), 1.0)
         return 0.5 * (value + 1.0) * self._max_width
 
     def gripper_action(self, width: float) -> float:
         """Inverse of :meth:`gripper_width`: the action component that commands ``width`` (m)."""
-        return float(np.clip(2.0 * width / self._max_width - 1.0, -1.0, 1.0))
+        return min(max(2.0 * width / self._max_width - 1.0, -1.0), 1.0)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Any, Dict, Mapping, Optional, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 import gymnasium as gym
 import numpy as np
@@ -19,10 +19,11 @@ from gymnasium import spaces
 from .config import load_env_config, load_robot_spec, simulation_settings
 from .control import ACTION_SIZE, JointCommandShaper
 from .kinematics import ForwardKinematics
-from .observation import ObservationBuilder, ObservationInputs
+from .observation import ObservationBuilder
 from .sim.robot import FR5Robot
 from .sim.world import PyBulletWorld
 from .tasks import GraspTask, ReachTask, Task, TaskState
+from .transforms import quaternion_z_axis
 
 TASKS = {"reach": ReachTask, "grasp": GraspTask}
 _REWARD_KEYS = {name: f"reward_{name}" for name in ("success", "collision", "progress", "action")}
@@ -61,7 +62,7 @@ class FR5Env(gym.Env):
 
         sim_cfg = simulation_settings(self.cfg, task)
         self._physics_dt = float(sim_cfg["physics_dt"])
-        self.world = PyBulletWorld(sim_cfg, gui=render_mode == "human")
+        self.world = PyBulletWorld(sim_cfg, gui=render_mode == "human", renders=render_mode is not None)
         self.world.add_table(self.cfg["table"])
         self.robot = FR5Robot(self.world.client, self.robot_spec, sim_cfg)
         # The robot stands on the table: its base never counts as touching it.
@@ -70,7 +71,8 @@ class FR5Env(gym.Env):
                                      physicsClientId=self.world.client)
         obj = self.cfg["object"]
         self._object_rest_height = 0.0
-        self._object_start = np.zeros(3)
+        self._object_rest_z = float(self.cfg["table"]["top_height"])
+        self._object_start: Tuple[float, float, float] = (0.0, 0.0, self._object_rest_z)
         self._gripper_command_width = self.robot_spec.max_opening_width
         self._action_queue: deque = deque()
         self._latency_steps = 0
@@ -89,7 +91,8 @@ class FR5Env(gym.Env):
         low, high = np.asarray(self._object_cfg["region_low"]), np.asarray(self._object_cfg["region_high"])
         xy = rng.uniform(low, high) if not options or "object_xy" not in options else np.asarray(options["object_xy"])
         table_top = float(self.cfg["table"]["top_height"])
-        self._object_start = np.array([xy[0], xy[1], table_top + self._object_rest_height])
+        self._object_rest_z = table_top + self._object_rest_height
+        self._object_start = (float(xy[0]), float(xy[1]), self._object_rest_z)
         self.world.place_object(self._object_start, yaw=float(rng.uniform(-np.pi, np.pi)))
 
         noise = float(self.cfg[self.task.name]["start_joint_noise"])
@@ -103,19 +106,22 @@ class FR5Env(gym.Env):
         self._steps = 0
         state, obs = self._observe()
         self.task.prime(state)
-        return obs, {"is_success": False, "failure": None, "object_start": self._object_start.copy()}
+        return obs, {"is_success": False, "failure": None, "object_start": np.array(self._object_start)}
 
     def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:
-        action = np.asarray(action, dtype=np.float64)
-        if action.shape != (ACTION_SIZE,):
-            raise ValueError(f"action must have {ACTION_SIZE} values, got shape {action.shape}")
-        if not math.isfinite(action.sum()):
+        if type(action) is not np.ndarray or action.shape != (ACTION_SIZE,):
+            action = np.asarray(action, dtype=np.float64)
+            if action.shape != (ACTION_SIZE,):
+                raise ValueError(f"action must have {ACTION_SIZE} values, got shape {action.shape}")
+        # Plain floats from here on: for seven values that is faster than numpy, and this runs
+        # thousands of times a second.
+        values = action.tolist()
+        if not math.isfinite(sum(values)):
             raise ValueError("action contains NaN or inf")
-        action = np.minimum(action, 1.0)
-        np.maximum(action, -1.0, out=action)
-        applied = self._delayed(action)
+        values = [1.0 if value > 1.0 else (-1.0 if value < -1.0 else value) for value in values]
+        applied = self._delayed(values)
         # The joint state measured by the last observation is still current: nothing moved since.
-        targets = self.shaper.arm_targets(applied, self._state.joint_positions)
+        targets = self.shaper.arm_target_list(applied, self._state.joint_positions)
         self._gripper_command_width = self.shaper.gripper_width(applied)
         self.robot.command(targets, self._gripper_command_width)
         self.world.step()
@@ -123,19 +129,18 @@ class FR5Env(gym.Env):
 
         state, obs = self._observe()
         outcome = self.task.judge(state, self.control_dt)
-        parts = self.task.reward(outcome, action)
+        parts = self.task.reward(outcome, values)
         terminated = outcome.success or outcome.failure is not None
         truncated = not terminated and self._steps >= self.task.max_steps
-        info: Dict[str, Any] = {"is_success": outcome.success, "failure": outcome.failure}
+        info: Dict[str, Any] = {"is_success": outcome.success,
+                                "failure": "timeout" if truncated else outcome.failure}
         for name, value in parts.items():
             info[_REWARD_KEYS[name]] = value
         for name, value in outcome.terms.items():
             info[_TERM_KEYS[name]] = value
-        if truncated:
-            info["failure"] = "timeout"
         if self.render_mode == "human":
             self.render()
-        return obs, float(sum(parts.values())), terminated, truncated, info
+        return obs, sum(parts.values()), terminated, truncated, info
 
     def render(self) -> Optional[np.ndarray]:
         if self.render_mode == "rgb_array":
@@ -152,7 +157,7 @@ class FR5Env(gym.Env):
 
     def object_position(self) -> np.ndarray:
         """Object centre in the world (= base_link) frame, metres."""
-        return self.world.object_pose()[0]
+        return np.array(self.world.object_pose()[0])
 
     @property
     def gripper_command_width(self) -> float:
@@ -164,21 +169,22 @@ class FR5Env(gym.Env):
         return self.robot.joint_state()[0]
 
     # ------------------------------------------------------------------ internals
-    def _delayed(self, action: np.ndarray) -> np.ndarray:
+    def _delayed(self, action: List[float]) -> List[float]:
         """Apply the configured action latency (whole control steps; 0 = none)."""
         if self._latency_steps == 0:
             return action
         self._action_queue.append(action)
         if len(self._action_queue) <= self._latency_steps:
-            hold = np.zeros(ACTION_SIZE)
-            hold[6] = self.shaper.gripper_action(self._gripper_command_width)
-            return hold
+            # Until the first action arrives the arm holds and the gripper keeps its command.
+            return [0.0] * (ACTION_SIZE - 1) + [self.shaper.gripper_action(self._gripper_command_width)]
         return self._action_queue.popleft()
 
     def task_state(self) -> TaskState:
-        """Ground-truth state the task judges (also used by the ROS simulator node)."""
-        q, qd, width = self.robot.joint_state()
-        tcp_position, tcp_rotation = self.robot.tcp_pose_from_simulator()
+        """Ground-truth state the task judges (also used by the ROS simulator node).
+
+        Four simulator queries in all: joints, tcp link, object, contacts.
+        """
+        q, qd, width, tcp_position, tcp_quaternion = self.robot.measure()
         object_position, object_quaternion = self.world.object_pose()
         table, obj, finger_links = self.world.table_id, self.world.object_id, self.robot.finger_links
         table_contact = arm_object_contact = False
@@ -194,9 +200,10 @@ class FR5Env(gym.Env):
         x, y, z = tcp_position
         (x_low, y_low, z_low), (x_high, y_high, z_high) = self._workspace
         return TaskState(
-            joint_positions=q, joint_velocities=qd, tcp_position=tcp_position, tcp_rotation=tcp_rotation, gripper_width=width,
+            joint_positions=q, joint_velocities=qd, tcp_position=tcp_position,
+            tcp_approach_axis=quaternion_z_axis(tcp_quaternion), gripper_width=width,
             tcp_to_object_distance=math.dist(object_position, tcp_position),
-            object_position=object_position, object_up_axis=p.getMatrixFromQuaternion(object_quaternion)[2::3],
+            object_position=object_position, object_up_axis=quaternion_z_axis(object_quaternion),
             object_start_position=self._object_start, robot_table_contact=table_contact,
             arm_object_contact=arm_object_contact, fingers_object_contact=len(pads),
             tcp_in_workspace=x_low <= x <= x_high and y_low <= y <= y_high and z_low <= z <= z_high,
@@ -204,25 +211,25 @@ class FR5Env(gym.Env):
 
     def _observe(self) -> Tuple[TaskState, np.ndarray]:
         self._state = state = self.task_state()
-        q, qd, width = state.joint_positions, state.joint_velocities, state.gripper_width
-        tcp_position, tcp_rotation, object_position = state.tcp_position, state.tcp_rotation, state.object_position
+        q, tcp_position, tcp_axis, object_position = (
+            state.joint_positions, state.tcp_position, state.tcp_approach_axis, state.object_position)
         if self._obs_noise_std > 0.0:
             rng = self.np_random
-            q = q + rng.normal(0.0, self._obs_noise_std, 6)
-            object_position = object_position + rng.normal(0.0, self._obs_noise_std, 3)
+            q = np.asarray(q) + rng.normal(0.0, self._obs_noise_std, 6)
+            object_position = np.asarray(object_position) + rng.normal(0.0, self._obs_noise_std, 3)
+            # The tcp pose follows the noisy joints, as FK of a noisy encoder reading would.
             tcp_position, tcp_rotation = self.kinematics.tcp_pose(q)
-        inputs = ObservationInputs(
-            joint_positions=q, joint_velocities=qd, gripper_width=width,
-            gripper_command_width=self._gripper_command_width, tcp_position=tcp_position,
-            tcp_rotation=tcp_rotation, object_position=object_position,
-            object_lift=float(object_position[2] - self.object_rest_z),
+            tcp_axis = tcp_rotation[:, 2]
+        obs = self.observation_builder.build_from(
+            q, state.joint_velocities, state.gripper_width, self._gripper_command_width, tcp_position, tcp_axis,
+            object_position, object_position[2] - self._object_rest_z,
         )
-        return state, self.observation_builder.build(inputs)
+        return state, obs
 
     @property
     def object_rest_z(self) -> float:
         """z (m, base_link) of the object's centre when it stands on the table."""
-        return float(self.cfg["table"]["top_height"]) + self._object_rest_height
+        return self._object_rest_z
 
     def _apply_randomisation(self, rng: np.random.Generator) -> None:
         """Object size/mass/friction, joint damping, latency, observation noise (if enabled)."""

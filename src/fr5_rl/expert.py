@@ -53,7 +53,7 @@ class ScriptedExpert:
         """Next action in [-1, 1]^7 (the observation is unused: the expert reads the simulator)."""
         env = self.env
         state = env.task_state()
-        q, tcp, obj = state.joint_positions, state.tcp_position, state.object_position
+        q, tcp, obj = (np.asarray(v) for v in (state.joint_positions, state.tcp_position, state.object_position))
         grasp = env.task.name == "grasp"
         grasp_point = obj + np.array([0.0, 0.0, self.grasp_height_offset if grasp else 0.0])
         horizontal_error = float(np.linalg.norm((grasp_point - tcp)[:2]))

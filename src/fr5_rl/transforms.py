@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Dict, List, Tuple
+from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 
@@ -37,6 +37,12 @@ def quaternion_from_matrix(rotation: np.ndarray) -> Tuple[float, float, float, f
     q = np.array([x, y, z, w])
     q /= np.linalg.norm(q)
     return tuple(float(v) for v in q)
+
+
+def quaternion_z_axis(quaternion: Sequence[float]) -> Tuple[float, float, float]:
+    """The z axis (third rotation column) of a unit quaternion (x, y, z, w), as plain floats."""
+    x, y, z, w = quaternion
+    return 2.0 * (x * z + y * w), 2.0 * (y * z - x * w), 1.0 - 2.0 * (x * x + y * y)
 
 
 def matrix_from_quaternion(xyz, quaternion) -> np.ndarray:

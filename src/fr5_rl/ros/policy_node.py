@@ -182,7 +182,7 @@ class PolicyNode:
             observation = self.builder.build(ObservationInputs(
                 joint_positions=state.positions, joint_velocities=state.velocities, gripper_width=width,
                 gripper_command_width=self.gripper_command_width, tcp_position=tcp_position,
-                tcp_rotation=tcp_rotation, object_position=object_position,
+                tcp_approach_axis=tcp_rotation[:, 2], object_position=object_position,
                 object_lift=float(object_position[2] - self.object_rest_z)))
         except ValueError as error:
             self._hold(str(error))

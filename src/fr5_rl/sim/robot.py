@@ -4,7 +4,7 @@ from __future__ import annotations
 import hashlib
 import tempfile
 from pathlib import Path
-from typing import Any, Dict, Mapping, Optional, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 import pybullet as p
@@ -63,7 +63,7 @@ class FR5Robot:
         self.all_joints = self.arm_joints + self.finger_joints
         self.link_index = link_index
         self.finger_links = {index for index in self.finger_joints}
-        n_arm = len(self.arm_joints)
+        n_arm = self._n_arm = len(self.arm_joints)
         # One motor call for all eight joints: per-joint forces and gains in one list each.
         # Grip force (N) the simulated gripper squeezes with: the PGI-140-80 is set between
         # 40 and 140 N; a 0.1 kg object needs little, and less force keeps contacts stable.
@@ -93,8 +93,8 @@ class FR5Robot:
         self._finger_target = finger
         self.command(joint_positions, opening_width)
 
-    def command(self, joint_targets: np.ndarray, opening_width: float, period: Optional[float] = None) -> None:
-        """Send position targets: arm (rad) and gripper opening width (m).
+    def command(self, joint_targets: Sequence[float], opening_width: float, period: Optional[float] = None) -> None:
+        """Send position targets: arm (rad, controller order) and gripper opening width (m).
 
         ``period`` (s) is how long this command stands before the next one (default: one
         control period); the finger targets ramp at the gripper's rated speed over it.
@@ -103,8 +103,7 @@ class FR5Robot:
         limit = self._finger_step if period is None else self._finger_velocity * period
         finger = self._finger_target + min(max(wanted - self._finger_target, -limit), limit)
         self._finger_target = finger
-        targets = list(joint_targets)
-        targets += (finger, finger)
+        targets = [*joint_targets, finger, finger]
         p.setJointMotorControlArray(
             self.body, self.all_joints, p.POSITION_CONTROL, targetPositions=targets,
             forces=self._forces, positionGains=self._position_gains, velocityGains=self._velocity_gains,
@@ -117,18 +116,29 @@ class FR5Robot:
             p.changeDynamics(self.body, index, jointDamping=float(damping), physicsClientId=self.client)
 
     # ------------------------------------------------------------------ state
+    def measure(self) -> Tuple[List[float], List[float], float, Tuple[float, ...], Tuple[float, ...]]:
+        """One read of the robot, in two simulator queries and plain floats (the step path).
+
+        Returns arm joint positions (rad) and velocities (rad/s) in controller order, the
+        gripper opening width (m), and the tcp position (m) and quaternion (x, y, z, w) in
+        base_link as the simulator computes them. Equal to
+        :class:`fr5_rl.kinematics.ForwardKinematics` (the ROS node's FK) to < 1e-6 m; the test
+        suite checks it.
+        """
+        states = p.getJointStates(self.body, self.all_joints, physicsClientId=self.client)
+        link = p.getLinkState(self.body, self.tcp_link, computeForwardKinematics=1, physicsClientId=self.client)
+        positions, velocities, _, _ = zip(*states)  # each joint: position, velocity, forces, torque
+        n_arm = self._n_arm
+        return (list(positions[:n_arm]), list(velocities[:n_arm]), sum(positions[n_arm:]),  # two fingers
+                link[4], link[5])
+
     def joint_state(self) -> Tuple[np.ndarray, np.ndarray, float]:
         """Measured arm positions (rad), velocities (rad/s) and gripper opening width (m)."""
-        states = p.getJointStates(self.body, self.all_joints, physicsClientId=self.client)
-        table = np.array([state[:2] for state in states])  # (8, 2): position, velocity
-        return table[:6, 0], table[:6, 1], float(table[6, 0] + table[7, 0])
+        positions, velocities, width, _, _ = self.measure()
+        return np.array(positions), np.array(velocities), width
 
     def tcp_pose_from_simulator(self) -> Tuple[np.ndarray, np.ndarray]:
-        """tcp position (m) and 3x3 rotation in base_link, as the simulator computes them.
-
-        Equal to :class:`fr5_rl.kinematics.ForwardKinematics` (the ROS node's FK) to < 1e-6 m;
-        the test suite checks it. The environment uses this one because it is already computed.
-        """
+        """tcp position (m) and 3x3 rotation in base_link, as the simulator computes them."""
         state = p.getLinkState(self.body, self.tcp_link, computeForwardKinematics=1, physicsClientId=self.client)
         rotation = np.array(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)
         return np.array(state[4]), rotation

@@ -14,7 +14,13 @@ import pybullet as p
 class PyBulletWorld:
     """Owns one PyBullet client: physics settings, the table, the object, stepping."""
 
-    def __init__(self, sim_cfg: Mapping[str, Any], gui: bool = False) -> None:
+    def __init__(self, sim_cfg: Mapping[str, Any], gui: bool = False, renders: bool = True) -> None:
+        """``renders=False``: a world nobody takes pictures of, which is faster to build.
+
+        PyBullet's built-in TinyRenderer converts every new body into a render mesh (0.3 ms
+        for the object, at every reset); without a renderer that work is skipped and
+        :meth:`render` is refused.
+        """
         if gui and not os.environ.get("DISPLAY"):
             # PyBullet's GUI would kill the whole process without a display.
             raise RuntimeError("render_mode='human' needs an X display; use xvfb-run or render_mode='rgb_array'")
@@ -32,10 +38,13 @@ class PyBulletWorld:
         )
         if gui:
             p.configureDebugVisualizer(p.COV_ENABLE_GUI, 0, physicsClientId=self.client)
+        self.renders = renders or gui
+        if not self.renders:
+            self._unload_renderer()
         self.table_id: Optional[int] = None
         self.object_id: Optional[int] = None
         self._object_shape: Optional[Tuple] = None
-        self._object_shapes: Optional[Tuple[int, int]] = None
+        self._object_shapes: Tuple[int, int] = (-1, -1)
 
     # ------------------------------------------------------------------ scene
     def add_table(self, table_cfg: Mapping[str, Any]) -> int:
@@ -61,40 +70,37 @@ class PyBulletWorld:
 
         ``dims`` is (radius, height) for a cylinder, (half_extent,) for a cube, in metres. A new
         body carries no contact cache or sleep history from the last episode, so
-        ``reset(seed=s)`` reproduces a rollout bit for bit. Shapes are reused while the size
-        stays the same.
+        ``reset(seed=s)`` reproduces a rollout bit for bit whatever ran before.
         """
-        key = (shape, tuple(round(d, 6) for d in dims))
+        body = self._create_object(shape, dims)  # raises before anything is removed
         if self.object_id is not None:
             p.removeBody(self.object_id, physicsClientId=self.client)
-        if key != self._object_shape:
+        self.object_id = body
+        p.changeDynamics(
+            body, -1, mass=mass, lateralFriction=friction, spinningFriction=0.001,
+            rollingFriction=0.0001, physicsClientId=self.client,
+        )
+        return body
+
+    def _create_object(self, shape: str, dims: Tuple[float, ...]) -> int:
+        key = (shape, tuple(round(d, 6) for d in dims))
+        if key != self._object_shape:  # shapes are reused while the size stays the same
+            color = [0.85, 0.2, 0.15, 1.0]
             if shape == "cylinder":
                 radius, height = dims
-                collision = p.createCollisionShape(
-                    p.GEOM_CYLINDER, radius=radius, height=height, physicsClientId=self.client
-                )
-                visual = p.createVisualShape(
-                    p.GEOM_CYLINDER, radius=radius, length=height, rgbaColor=[0.85, 0.2, 0.15, 1.0],
-                    physicsClientId=self.client,
-                )
+                collision = p.createCollisionShape(p.GEOM_CYLINDER, radius=radius, height=height,
+                                                   physicsClientId=self.client)
+                visual = p.createVisualShape(p.GEOM_CYLINDER, radius=radius, length=height, rgbaColor=color,
+                                             physicsClientId=self.client) if self.renders else -1
             elif shape == "box":
                 (half,) = dims
-                collision = p.createCollisionShape(
-                    p.GEOM_BOX, halfExtents=[half] * 3, physicsClientId=self.client
-                )
-                visual = p.createVisualShape(
-                    p.GEOM_BOX, halfExtents=[half] * 3, rgbaColor=[0.85, 0.2, 0.15, 1.0],
-                    physicsClientId=self.client,
-                )
+                collision = p.createCollisionShape(p.GEOM_BOX, halfExtents=[half] * 3, physicsClientId=self.client)
+                visual = p.createVisualShape(p.GEOM_BOX, halfExtents=[half] * 3, rgbaColor=color,
+                                             physicsClientId=self.client) if self.renders else -1
             else:
                 raise ValueError(f"object.shape must be 'cylinder' or 'box', got '{shape}'")
             self._object_shapes, self._object_shape = (collision, visual), key
-        self.object_id = p.createMultiBody(mass, *self._object_shapes, [0, 0, 1], physicsClientId=self.client)
-        p.changeDynamics(
-            self.object_id, -1, mass=mass, lateralFriction=friction, spinningFriction=0.001,
-            rollingFriction=0.0001, physicsClientId=self.client,
-        )
-        return self.object_id
+        return p.createMultiBody(1.0, *self._object_shapes, [0, 0, 1], physicsClientId=self.client)
 
     def place_object(self, position: Sequence[float], yaw: float = 0.0) -> None:
         """Teleport the object to ``position`` (m, base_link) at rest, upright, with ``yaw`` (rad)."""
@@ -108,10 +114,9 @@ class PyBulletWorld:
         p.changeDynamics(self.object_id, -1, activationState=p.ACTIVATION_STATE_SLEEP,
                          physicsClientId=self.client)
 
-    def object_pose(self) -> Tuple[np.ndarray, Tuple[float, ...]]:
+    def object_pose(self) -> Tuple[Tuple[float, float, float], Tuple[float, float, float, float]]:
         """Object centre position (m) and quaternion (x, y, z, w) in base_link."""
-        position, orientation = p.getBasePositionAndOrientation(self.object_id, physicsClientId=self.client)
-        return np.array(position), orientation
+        return p.getBasePositionAndOrientation(self.object_id, physicsClientId=self.client)
 
     # ------------------------------------------------------------------ physics
     def set_physics_dt(self, physics_dt: float, control_dt: float) -> None:
@@ -125,8 +130,18 @@ class PyBulletWorld:
         for _ in range(self.substeps):
             p.stepSimulation(physicsClientId=self.client)
 
+    def _unload_renderer(self) -> None:
+        # The TinyRenderer is linked into PyBullet as a plugin; loading it by name returns the
+        # loaded instance's id. Should a PyBullet build lack it, nothing changes.
+        plugin = p.loadPlugin("tinyRendererPlugin", physicsClientId=self.client)
+        if plugin >= 0:
+            p.unloadPlugin(plugin, physicsClientId=self.client)
+
     def render(self, width: int = 480, height: int = 360, target=(-0.45, 0.0, 0.15)) -> np.ndarray:
         """RGB image (H, W, 3) uint8 from a fixed camera, headless TinyRenderer."""
+        if not self.renders:
+            raise RuntimeError("this world was built with renders=False; build the environment with "
+                               "render_mode='rgb_array' to take pictures")
         view = p.computeViewMatrixFromYawPitchRoll(
             cameraTargetPosition=target, distance=1.5, yaw=-60.0, pitch=-30.0, roll=0.0, upAxisIndex=2,
             physicsClientId=self.client,

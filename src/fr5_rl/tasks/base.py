@@ -3,24 +3,28 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, Mapping, Optional
+from typing import Any, Dict, Mapping, Optional, Sequence
 
 import numpy as np
 
 
 @dataclass
 class TaskState:
-    """Everything a task needs to judge one control step (base_link frame, SI units)."""
+    """Everything a task needs to judge one control step (base_link frame, SI units).
 
-    joint_positions: np.ndarray  # (6,) rad, measured, controller order
-    joint_velocities: np.ndarray  # (6,) rad/s
-    tcp_position: np.ndarray  # (3,) m
-    tcp_rotation: np.ndarray  # (3, 3)
+    Vectors are plain sequences of floats (lists or tuples, as the simulator returns them):
+    the environments build one of these every step.
+    """
+
+    joint_positions: Sequence[float]  # (6,) rad, measured, controller order
+    joint_velocities: Sequence[float]  # (6,) rad/s
+    tcp_position: Sequence[float]  # (3,) m
+    tcp_approach_axis: Sequence[float]  # (3,) unit vector: the tcp z axis (gripper pointing direction)
     gripper_width: float  # m, measured opening
     tcp_to_object_distance: float  # m, tcp to object centre
-    object_position: np.ndarray  # (3,) m, centre
-    object_up_axis: np.ndarray  # (3,) object's own z axis in base_link
-    object_start_position: np.ndarray  # (3,) m, where it was placed at reset
+    object_position: Sequence[float]  # (3,) m, centre
+    object_up_axis: Sequence[float]  # (3,) object's own z axis in base_link
+    object_start_position: Sequence[float]  # (3,) m, where it was placed at reset
     robot_table_contact: bool  # any robot link touches the table
     arm_object_contact: bool  # a robot link other than the finger pads touches the object
     fingers_object_contact: int  # how many finger pads touch the object (0, 1, 2)
@@ -36,9 +40,9 @@ class TaskOutcome:
     terms: Dict[str, float] = field(default_factory=dict)  # shaping terms, unweighted
 
 
-def approach_angle(tcp_rotation: np.ndarray) -> float:
-    """Angle (rad) between the tcp z axis (approach direction) and straight down (-z)."""
-    return math.acos(min(max(-float(tcp_rotation[2, 2]), -1.0), 1.0))
+def approach_angle(tcp_approach_axis: Sequence[float]) -> float:
+    """Angle (rad) between the tcp z axis (approach direction, unit vector) and straight down (-z)."""
+    return math.acos(min(max(-float(tcp_approach_axis[2]), -1.0), 1.0))
 
 
 class Task:
@@ -76,7 +80,7 @@ class Task:
     def judge(self, state: TaskState, control_dt: float) -> TaskOutcome:  # pragma: no cover
         raise NotImplementedError
 
-    def reward(self, outcome: TaskOutcome, action: np.ndarray) -> Dict[str, float]:
+    def reward(self, outcome: TaskOutcome, action: Sequence[float]) -> Dict[str, float]:
         """Reward of one step, returned as its named parts (their sum is the reward).
 
         Dense mode pays progress in the weighted shaping potential (potential-based shaping:
@@ -94,7 +98,7 @@ class Task:
         previous = potential if self._previous_potential is None else self._previous_potential
         self._previous_potential = potential
         parts["progress"] = self.potential_gain * (potential - previous)
-        parts["action"] = -self.action_penalty * float(action @ action)
+        parts["action"] = -self.action_penalty * sum(value * value for value in action)
         return parts
 
     def prime(self, state: TaskState) -> None:
@@ -122,7 +126,7 @@ class Task:
         Linear in the angle rather than the seed's cosine: a cosine is flat near zero tilt and
         gives no push to correct the last 10-20 degrees, which is exactly what success needs.
         """
-        return -approach_angle(state.tcp_rotation) / self.orientation_scale
+        return -approach_angle(state.tcp_approach_axis) / self.orientation_scale
 
     def gripper_term(self, state: TaskState, wanted_width: float) -> float:
         """-|measured width - wanted width| / max opening width."""

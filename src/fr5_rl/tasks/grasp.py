@@ -24,8 +24,9 @@ class GraspTask(Task):
         self.hold_time = float(self.task_cfg["hold_time"])
         self.max_tilt_cos = float(np.cos(np.deg2rad(float(self.task_cfg["knocked_over_angle_deg"]))))
         obj = cfg["object"]
-        self.region_low = np.asarray(obj["region_low"], dtype=np.float64) - 0.1
-        self.region_high = np.asarray(obj["region_high"], dtype=np.float64) + 0.1
+        # Pushed more than 10 cm beyond the placement region: out of reach.
+        self.region_low = [float(v) - 0.1 for v in obj["region_low"]]
+        self.region_high = [float(v) + 0.1 for v in obj["region_high"]]
         # Close when the tcp is this close to the object centre (m): the shaping's cue.
         self.close_distance = 0.02
         self.lifted_time = 0.0
@@ -36,7 +37,7 @@ class GraspTask(Task):
 
     def lift(self, state: TaskState) -> float:
         """Height (m) of the object centre above where it was placed."""
-        return float(state.object_position[2] - state.object_start_position[2])
+        return state.object_position[2] - state.object_start_position[2]
 
     def terms(self, state: TaskState) -> Dict[str, float]:
         near = state.tcp_to_object_distance < self.close_distance
@@ -56,8 +57,9 @@ class GraspTask(Task):
             return TaskOutcome(False, failure, terms)
         if float(state.object_up_axis[2]) < self.max_tilt_cos:
             return TaskOutcome(False, "object_knocked_over", terms)
-        xy = state.object_position[:2]
-        if np.any(xy < self.region_low) or np.any(xy > self.region_high):
+        x, y = state.object_position[0], state.object_position[1]
+        (x_low, y_low), (x_high, y_high) = self.region_low, self.region_high
+        if not (x_low <= x <= x_high and y_low <= y <= y_high):
             return TaskOutcome(False, "object_out_of_reach", terms)
         if self.lift(state) >= self.lift_height:
             self.lifted_time += control_dt

@@ -37,7 +37,7 @@ class ReachTask(Task):
             return TaskOutcome(False, failure, terms)
         success = (
             state.tcp_to_object_distance <= self.success_distance
-            and -state.tcp_rotation[2, 2] >= self.min_down_cosine  # approach angle within limit
+            and -state.tcp_approach_axis[2] >= self.min_down_cosine  # approach angle within limit
             and state.gripper_width >= self.min_open_width
         )
         return TaskOutcome(success, None, terms)
