@@ -17,7 +17,9 @@ steps are not), median of the repeats:
   else; the replay ends with the joints the env ended with (the deviation is reported). The
   env's time includes its resets, the replay's does not;
 - for comparison, ``stepSimulation`` of the scene at rest right after a reset (nothing moves,
-  the object sleeps), which is cheaper than the moving scene the env simulates.
+  the object sleeps), which is cheaper than the moving scene the env simulates;
+- the floor: the replay plus the four simulator queries every step needs (joints, tcp link,
+  object pose, contacts), their results unused.
 
 Inference latency of a model directory (default models/reach; skipped when absent): p50/p99
 of single-observation ``Policy.act`` calls through ``fr5_rl.policy.load_policy`` for the torch
@@ -124,24 +126,37 @@ def record_episodes(env, actions: np.ndarray, first_seed: int) -> List[Dict[str,
     return episodes
 
 
-def replay_bare(env, episodes: List[Dict[str, Any]]) -> Dict[str, float]:
+def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False) -> Dict[str, float]:
     """Bare PyBullet doing the env's physics: per control step one motor command and
     ``substeps`` ``stepSimulation`` calls, nothing else. Each episode's start is rebuilt with
     the env's own seeded reset (not timed). Returns the timed seconds and how far the replayed
-    joints ended from the env's (rad), which shows the replay is the same motion."""
+    joints ended from the env's (rad), which shows the replay is the same motion.
+
+    ``with_queries`` adds, per control step, the four state queries any environment of this
+    task needs (joint states, tcp link state, object pose, the robot's contacts) and does
+    nothing with their results: the floor a Python environment on PyBullet can reach."""
     import pybullet as p
 
     client, substeps = env.world.client, env.world.substeps
     command, step_simulation, perf = env.robot.command, p.stepSimulation, time.perf_counter
+    body, joints, tcp, obj = env.robot.body, env.robot.all_joints, env.robot.tcp_link, env.world.object_id
+    get_joints, get_link, get_pose, get_contacts = (
+        p.getJointStates, p.getLinkState, p.getBasePositionAndOrientation, p.getContactPoints)
     seconds, deviation = 0.0, 0.0
     for episode in episodes:
         env.reset(seed=episode["seed"])
         commands = episode["commands"]
+        obj = env.world.object_id
         t0 = perf()
         for joint_targets, opening_width in commands:
             command(joint_targets, opening_width)
             for _ in range(substeps):
                 step_simulation(physicsClientId=client)
+            if with_queries:
+                get_joints(body, joints, physicsClientId=client)
+                get_link(body, tcp, computeForwardKinematics=1, physicsClientId=client)
+                get_pose(obj, physicsClientId=client)
+                get_contacts(bodyA=body, physicsClientId=client)
         seconds += perf() - t0
         deviation = max(deviation, float(np.max(np.abs(env.joint_positions() - episode["final_joint_positions"]))))
     return {"seconds": seconds, "max_final_joint_deviation_rad": deviation}
@@ -202,6 +217,7 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0)
         if [e["seed"] for e in episodes] != seeds or sum(len(e["commands"]) for e in episodes) != steps:
             raise RuntimeError("the recording run differs from the timed run: the environment is not deterministic")
         replay = replay_bare(env, episodes)
+        floor = replay_bare(env, episodes, with_queries=True)
         resting_s = resting_step_seconds(env, steps, first_seed)
         per_repeat.append({
             "env_seconds": round(env_s, 4),
@@ -215,6 +231,8 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0)
             "bare_replay_step_us": 1e6 * replay["seconds"] / steps,
             "bare_replay_max_final_joint_deviation_rad": replay["max_final_joint_deviation_rad"],
             "overhead": env_s / replay["seconds"],
+            "bare_replay_with_queries_step_us": 1e6 * floor["seconds"] / steps,
+            "overhead_floor_with_queries": floor["seconds"] / replay["seconds"],
             "resting_physics_substep_us": 1e6 * resting_s / (steps * substeps),
             "overhead_over_resting_scene": env_s / resting_s,
         })
@@ -241,6 +259,8 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0)
         "python_in_env_step_us": median("python_in_env_step_us"),
         "bare_replay_step_us": median("bare_replay_step_us"),
         "overhead": overhead,
+        "bare_replay_with_queries_step_us": median("bare_replay_with_queries_step_us"),
+        "overhead_floor_with_queries": median("overhead_floor_with_queries"),
         "resting_physics_substep_us": median("resting_physics_substep_us"),
         "overhead_over_resting_scene": median("overhead_over_resting_scene"),
         "per_repeat": per_repeat,
@@ -385,7 +405,9 @@ def print_env_table(rows: List[Dict[str, Any]]) -> None:
               f"{r['physics_in_env_step_us']:.0f}us are physics ({r['substeps']} substeps) and "
               f"{r['python_in_env_step_us']:.0f}us the rest (commands, state queries, observation, task, resets); "
               f"the resting scene steps in {r['resting_physics_substep_us']:.0f}us per substep "
-              f"({r['overhead_over_resting_scene']:.2f}x)")
+              f"({r['overhead_over_resting_scene']:.2f}x); the replay plus the four state queries an "
+              f"env needs takes {r['bare_replay_with_queries_step_us']:.0f}us "
+              f"({r['overhead_floor_with_queries']:.2f}x, the floor for a Python env)")
     print(f"targets: reach >= {TARGETS['FR5Reach-v0']['real_time_factor']:.0f}x real time, grasp >= "
           f"{TARGETS['FR5Grasp-v0']['real_time_factor']:.0f}x, overhead <= {TARGETS['overhead_max']}x "
           "(env time / time of bare PyBullet replaying the same commands: one motor call and the "

@@ -40,7 +40,9 @@ else:
     solved = [h for h in summary["history"] if h.get("eval_success", 0) >= target_rate]
     solved_s = solved[0]["wall_s"] if solved else None
     solved_steps = solved[0]["samples"] if solved else None
-result = {"task": args.task, "command": " ".join(Path(c).name if i < 2 else c for i, c in enumerate(command)),
+# The command as a reader would type it: no interpreter or temporary-directory paths.
+shown = [Path(c).name if i < 2 else ("RUN_DIR" if c == str(run_dir) else c) for i, c in enumerate(command)]
+result = {"task": args.task, "command": " ".join(shown),
           "target_success": target_rate, "time_to_solve_s": solved_s, "steps_or_samples_to_solve": solved_steps,
           "target_s": target_s, "wall_time_total_s": round(time.time() - start, 1), "machine": summary.get("machine"),
           "pass": solved_s is not None and solved_s <= target_s}

@@ -5,8 +5,6 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Dict, Mapping, Optional, Sequence
 
-import numpy as np
-
 
 @dataclass
 class TaskState:
