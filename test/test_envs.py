@@ -152,6 +152,27 @@ def test_rgb_array_render(env_id):
         env.close()
 
 
+def test_render_beside_envs_without_renderer():
+    """Envs built without a render mode drop PyBullet's renderer from their own client only: a
+    rendering env in the same process still draws the object (red pixels where the object is
+    dropped from the non-rendering world's meshes, it would be missing)."""
+    quiet_before = FR5Env(task="reach")
+    drawing = FR5Env(task="reach", render_mode="rgb_array")
+    quiet_after = FR5Env(task="reach")
+    try:
+        for env in (quiet_before, drawing, quiet_after):
+            env.reset(seed=0)
+        frame = drawing.render().astype(int)
+        red = (frame[:, :, 0] > 150) & (frame[:, :, 1] < 90) & (frame[:, :, 2] < 90)
+        assert red.sum() > 20, "the object is not in the picture"
+        assert quiet_before.render() is None
+        with pytest.raises(RuntimeError, match="render_mode='rgb_array'"):
+            quiet_after.world.render()
+    finally:
+        for env in (quiet_before, drawing, quiet_after):
+            env.close()
+
+
 @pytest.mark.parametrize("env_id,size", [("FR5Reach-v0", 23), ("FR5Grasp-v0", 24)])
 def test_spaces_and_control_dt(env_id, size):
     env = gym.make(env_id)
