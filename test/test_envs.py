@@ -490,8 +490,9 @@ def test_observation_matches_simulator_state():
 # ----------------------------------------------------------------------------- bad input
 @pytest.mark.parametrize("bad", [
     [np.nan, 0, 0, 0, 0, 0, 0], [0, 0, 0, np.inf, 0, 0, 0], [0, 0, 0, 0, 0, 0, -np.inf],
-    [0.0] * 6, [0.0] * 8, [], [[0.0] * 7, [0.0] * 7]],
-    ids=["nan", "inf", "-inf", "6", "8", "empty", "2x7"])
+    [0.0] * 6, [0.0] * 8, [], [[0.0] * 7, [0.0] * 7], np.array(["a"] * 7), np.array([None] * 7, dtype=object),
+    np.zeros((7, 1), dtype=np.float32), "abcdefg"],
+    ids=["nan", "inf", "-inf", "6", "8", "empty", "2x7", "str array", "object array", "7x1", "string"])
 def test_bad_actions_raise(bad):
     env = make("reach")
     try:
@@ -610,6 +611,19 @@ def test_success_step_pays_bonus_in_dense_mode():
 
 
 # ----------------------------------------------------------------------------- kinematics
+def test_quaternion_z_axis_matches_pybullet():
+    """The env reads orientations from PyBullet's quaternions, which are unit length only to
+    ~1e-7; the axis must equal PyBullet's own (normalising) matrix column regardless."""
+    from fr5_rl.transforms import quaternion_z_axis
+
+    rng = np.random.default_rng(3)
+    for _ in range(500):
+        quaternion = rng.normal(size=4)
+        quaternion *= rng.uniform(0.999, 1.001) / np.linalg.norm(quaternion)
+        expected = np.array(p.getMatrixFromQuaternion(quaternion.tolist())).reshape(3, 3)[:, 2]
+        np.testing.assert_allclose(quaternion_z_axis(quaternion.tolist()), expected, atol=1e-12)
+
+
 def test_forward_kinematics_matches_pybullet():
     """fr5_rl.kinematics (what the ROS node uses) equals PyBullet's tcp link pose."""
     env = make("reach")

@@ -168,6 +168,17 @@ def test_non_finite_input_raises(grasp_builder, field, value):
         grasp_builder.build(inputs(**{field: value}))
 
 
+@pytest.mark.parametrize("field,value", [
+    ("joint_positions", np.zeros((6, 1))), ("joint_positions", [None] * 6), ("joint_velocities", np.zeros(5)),
+    ("tcp_position", np.zeros((3, 2))), ("tcp_position", 0.5), ("tcp_position", np.zeros(4)),
+    ("tcp_approach_axis", np.zeros(2)), ("object_position", "abc"), ("gripper_width", "x"),
+], ids=["q 6x1", "q None", "qd 5", "tcp 3x2", "tcp scalar", "tcp 4", "axis 2", "object str", "width str"])
+def test_malformed_input_raises_value_error(grasp_builder, field, value):
+    """The policy node holds on ValueError; nothing malformed may escape as another error."""
+    with pytest.raises(ValueError):
+        grasp_builder.build(inputs(**{field: value}))
+
+
 def test_out_buffer_is_used(reach_builder):
     out = np.full(23, 7.0, dtype=np.float32)
     result = reach_builder.build(inputs(), out=out)
@@ -285,8 +296,10 @@ def test_shaper_non_finite_measurement_raises():
         shaper().arm_targets(action(np.zeros(6)), measured)
 
 
-@pytest.mark.parametrize("bad_action,bad_measured", [(np.zeros(6), MID), (np.zeros(8), MID),
-                                                     (np.zeros(7), MID[:5])])
+@pytest.mark.parametrize("bad_action,bad_measured", [
+    (np.zeros(6), MID), (np.zeros(8), MID), (np.zeros(7), MID[:5]), (np.zeros(7), np.zeros((6, 2))),
+    ([None] * 7, MID), (["a"] * 7, MID), ([[0.1]] * 7, MID), ([0.1] * 7, [None] * 6), ([0.1] * 6, MID),
+    (np.array(["a"] * 7), MID)])
 def test_shaper_wrong_shapes_raise(bad_action, bad_measured):
     with pytest.raises(ValueError):
         shaper().arm_targets(bad_action, bad_measured)

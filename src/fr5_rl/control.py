@@ -53,7 +53,11 @@ class JointCommandShaper:
         action = self._float_list(action, ACTION_SIZE, "an action")
         measured = self._float_list(measured_joint_positions, self._n_joints, "measured joint positions")
         # One sum is finite exactly when every term is (overflowing input is refused too).
-        if not math.isfinite(sum(action) + sum(measured)):
+        try:
+            finite = math.isfinite(sum(action) + sum(measured))
+        except TypeError:  # a list holding something other than numbers
+            raise ValueError("action and measured joint positions must be numbers") from None
+        if not finite:
             raise ValueError("action or measured joint positions contain NaN or inf")
         gain, keep = self._alpha * self._max_step, 1.0 - self._alpha
         filtered, targets = [], []
@@ -72,7 +76,10 @@ class JointCommandShaper:
     @staticmethod
     def _float_list(values: Sequence[float], size: int, what: str) -> List[float]:
         if type(values) is not list:  # arrays, tuples: check the shape through numpy once
-            array = np.asarray(values, dtype=np.float64)
+            try:
+                array = np.asarray(values, dtype=np.float64)
+            except (TypeError, ValueError) as error:
+                raise ValueError(f"expected {what} as {size} numbers: {error}") from None
             if array.shape != (size,):
                 raise ValueError(f"expected {what} of shape ({size},), got {array.shape}")
             return array.tolist()

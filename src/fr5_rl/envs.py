@@ -109,8 +109,11 @@ class FR5Env(gym.Env):
         return obs, {"is_success": False, "failure": None, "object_start": np.array(self._object_start)}
 
     def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:
-        if type(action) is not np.ndarray or action.shape != (ACTION_SIZE,):
-            action = np.asarray(action, dtype=np.float64)
+        if type(action) is not np.ndarray or action.dtype.kind != "f" or action.shape != (ACTION_SIZE,):
+            try:
+                action = np.asarray(action, dtype=np.float64)
+            except (TypeError, ValueError) as error:
+                raise ValueError(f"action must be {ACTION_SIZE} numbers: {error}") from None
             if action.shape != (ACTION_SIZE,):
                 raise ValueError(f"action must have {ACTION_SIZE} values, got shape {action.shape}")
         # Plain floats from here on: for seven values that is faster than numpy, and this runs

@@ -95,19 +95,26 @@ class ObservationBuilder:
                    object_lift: float = 0.0, out: Optional[np.ndarray] = None) -> np.ndarray:
         """The observation from the fields of :class:`ObservationInputs`, given as arguments.
 
-        Raises ValueError on non-finite input or a sequence of the wrong length.
+        Raises ValueError on NaN or inf, on something that is not a number, or on a sequence
+        of the wrong length. Finite values outside their range are clipped to [-1, 1].
         """
-        if len(joint_positions) != 6 or len(joint_velocities) != 6 or len(tcp_approach_axis) != 3:
-            raise ValueError("observation inputs need 6 joint positions, 6 velocities and a 3-D approach axis")
-        tcp_x, tcp_y, tcp_z = tcp_position
-        object_x, object_y, object_z = object_position
-        raw = [*joint_positions, *joint_velocities, gripper_width, gripper_command_width, tcp_x, tcp_y, tcp_z,
-               *tcp_approach_axis, object_x - tcp_x, object_y - tcp_y, object_z - tcp_z]
-        if self.include_lift:
-            raw.append(object_lift)
-        if not math.isfinite(sum(raw)):  # a single NaN or inf makes the sum non-finite
+        try:
+            if (len(joint_positions) != 6 or len(joint_velocities) != 6 or len(tcp_position) != 3
+                    or len(tcp_approach_axis) != 3 or len(object_position) != 3):
+                raise ValueError("observation inputs need 6 joint positions, 6 velocities and 3-D tcp "
+                                 "position, approach axis and object position")
+            tcp_x, tcp_y, tcp_z = tcp_position
+            object_x, object_y, object_z = object_position
+            raw = [*joint_positions, *joint_velocities, gripper_width, gripper_command_width, tcp_x, tcp_y, tcp_z,
+                   *tcp_approach_axis, object_x - tcp_x, object_y - tcp_y, object_z - tcp_z]
+            if self.include_lift:
+                raw.append(object_lift)
+            finite = math.isfinite(sum(raw))  # a single NaN or inf makes the sum non-finite
+            scaled = np.array(raw, dtype=np.float64)
+        except TypeError as error:  # a scalar where a sequence belongs, a string, None, a nested array
+            raise ValueError(f"observation inputs must be numbers and sequences of numbers: {error}") from None
+        if not finite:
             raise ValueError("observation inputs contain NaN or inf")
-        scaled = np.array(raw, dtype=np.float64)
         scaled *= self._gain
         scaled -= self._bias
         np.minimum(scaled, 1.0, out=scaled)

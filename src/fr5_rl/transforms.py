@@ -40,9 +40,14 @@ def quaternion_from_matrix(rotation: np.ndarray) -> Tuple[float, float, float, f
 
 
 def quaternion_z_axis(quaternion: Sequence[float]) -> Tuple[float, float, float]:
-    """The z axis (third rotation column) of a unit quaternion (x, y, z, w), as plain floats."""
+    """The z axis (third rotation column) of a quaternion (x, y, z, w), as plain floats.
+
+    Normalised as PyBullet's ``getMatrixFromQuaternion`` does: simulator quaternions are unit
+    length only to ~1e-7, and near vertical ``acos`` of the axis magnifies that.
+    """
     x, y, z, w = quaternion
-    return 2.0 * (x * z + y * w), 2.0 * (y * z - x * w), 1.0 - 2.0 * (x * x + y * y)
+    s = 2.0 / (x * x + y * y + z * z + w * w)
+    return s * (x * z + y * w), s * (y * z - x * w), 1.0 - s * (x * x + y * y)
 
 
 def matrix_from_quaternion(xyz, quaternion) -> np.ndarray:
