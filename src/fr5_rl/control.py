@@ -16,6 +16,34 @@ from .config import RobotSpec
 ACTION_SIZE = 7
 
 
+def finite_values(values: Sequence[float], size: int, what: str) -> List[float]:
+    """``values`` as a list of ``size`` finite Python floats.
+
+    Raises ValueError, naming ``what``, for anything else: a wrong shape, something that is
+    not a number, NaN or inf (overflowing input too). A list of floats passes without a copy.
+    """
+    if type(values) is not list:
+        if type(values) is np.ndarray and values.dtype.kind == "f" and values.shape == (size,):
+            values = values.tolist()
+        else:  # anything else: let numpy check the shape and convert once
+            try:
+                array = np.asarray(values, dtype=np.float64)
+            except (TypeError, ValueError) as error:
+                raise ValueError(f"{what} must be {size} numbers: {error}") from None
+            if array.shape != (size,):
+                raise ValueError(f"{what} must have shape ({size},), got {array.shape}")
+            values = array.tolist()
+    elif len(values) != size:
+        raise ValueError(f"{what} must have {size} values, got {len(values)}")
+    try:
+        finite = math.isfinite(sum(values))  # one sum is finite exactly when every term is
+    except TypeError:  # a list holding something other than numbers
+        raise ValueError(f"{what} must be {size} numbers") from None
+    if not finite:
+        raise ValueError(f"{what} contains NaN or inf")
+    return values
+
+
 class JointCommandShaper:
     """Scale, low-pass, rate-limit and clamp actions into joint position targets.
 
@@ -50,15 +78,8 @@ class JointCommandShaper:
 
     def arm_target_list(self, action: Sequence[float], measured_joint_positions: Sequence[float]) -> List[float]:
         """:meth:`arm_targets` as a list of floats (what PyBullet and ROS messages take)."""
-        action = self._float_list(action, ACTION_SIZE, "an action")
-        measured = self._float_list(measured_joint_positions, self._n_joints, "measured joint positions")
-        # One sum is finite exactly when every term is (overflowing input is refused too).
-        try:
-            finite = math.isfinite(sum(action) + sum(measured))
-        except TypeError:  # a list holding something other than numbers
-            raise ValueError("action and measured joint positions must be numbers") from None
-        if not finite:
-            raise ValueError("action or measured joint positions contain NaN or inf")
+        action = finite_values(action, ACTION_SIZE, "the action")
+        measured = finite_values(measured_joint_positions, self._n_joints, "the measured joint positions")
         gain, keep = self._alpha * self._max_step, 1.0 - self._alpha
         filtered, targets = [], []
         # Conditional expressions rather than min/max calls: this loop runs in every step.
@@ -72,20 +93,6 @@ class JointCommandShaper:
             targets.append(upper if target > upper else (lower if target < lower else target))
         self._filtered_step = filtered
         return targets
-
-    @staticmethod
-    def _float_list(values: Sequence[float], size: int, what: str) -> List[float]:
-        if type(values) is not list:  # arrays, tuples: check the shape through numpy once
-            try:
-                array = np.asarray(values, dtype=np.float64)
-            except (TypeError, ValueError) as error:
-                raise ValueError(f"expected {what} as {size} numbers: {error}") from None
-            if array.shape != (size,):
-                raise ValueError(f"expected {what} of shape ({size},), got {array.shape}")
-            return array.tolist()
-        if len(values) != size:
-            raise ValueError(f"expected {what} of {size} values, got {len(values)}")
-        return values
 
     def gripper_width(self, action: Sequence[float]) -> float:
         """Commanded opening width (m) from the action's last component (-1 closed, +1 open)."""

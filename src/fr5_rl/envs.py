@@ -17,7 +17,7 @@ import pybullet as p
 from gymnasium import spaces
 
 from .config import load_env_config, load_robot_spec, simulation_settings
-from .control import ACTION_SIZE, JointCommandShaper
+from .control import ACTION_SIZE, JointCommandShaper, finite_values
 from .kinematics import ForwardKinematics
 from .observation import ObservationBuilder
 from .sim.robot import FR5Robot
@@ -109,18 +109,9 @@ class FR5Env(gym.Env):
         return obs, {"is_success": False, "failure": None, "object_start": np.array(self._object_start)}
 
     def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:
-        if type(action) is not np.ndarray or action.dtype.kind != "f" or action.shape != (ACTION_SIZE,):
-            try:
-                action = np.asarray(action, dtype=np.float64)
-            except (TypeError, ValueError) as error:
-                raise ValueError(f"action must be {ACTION_SIZE} numbers: {error}") from None
-            if action.shape != (ACTION_SIZE,):
-                raise ValueError(f"action must have {ACTION_SIZE} values, got shape {action.shape}")
         # Plain floats from here on: for seven values that is faster than numpy, and this runs
         # thousands of times a second.
-        values = action.tolist()
-        if not math.isfinite(sum(values)):
-            raise ValueError("action contains NaN or inf")
+        values = finite_values(action, ACTION_SIZE, "the action")
         values = [1.0 if value > 1.0 else (-1.0 if value < -1.0 else value) for value in values]
         applied = self._delayed(values)
         # The joint state measured by the last observation is still current: nothing moved since.
