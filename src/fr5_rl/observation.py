@@ -56,11 +56,12 @@ class ObservationInputs:
 class ObservationBuilder:
     """Normalises the raw inputs into the policy's observation vector.
 
-    The raw values are laid out in one float64 vector and mapped with a single affine
-    transform ``raw * gain - bias`` (``gain = 1 / half_range``, ``bias = centre * gain``)
-    followed by clipping: the layout table above, as data. :meth:`build` takes an
-    :class:`ObservationInputs`; :meth:`build_from` takes the same values as arguments (the
-    environments' step path, which avoids building the dataclass 3000 times a second).
+    The raw values are laid out in one list and mapped with a single affine transform
+    ``raw * gain - bias`` (``gain = 1 / half_range``, ``bias = centre * gain``) followed by
+    clipping: the layout table above, as data. The arithmetic is on plain floats: for 24
+    values, right after a physics step, that measured 7-10 us faster per env step than numpy.
+    :meth:`build` takes an :class:`ObservationInputs`; :meth:`build_from` takes the same
+    values as arguments (the environments' step path).
     """
 
     def __init__(self, robot: RobotSpec, obs_cfg: Mapping[str, Any], include_lift: bool) -> None:
@@ -78,8 +79,8 @@ class ObservationBuilder:
         offset[14:17], half_range[14:17] = (high + low) / 2.0, (high - low) / 2.0
         half_range[20:23] = float(obs_cfg["relative_position_scale"])
         half_range[23] = float(obs_cfg["lift_scale"])
-        self._gain = 1.0 / half_range[: self.size]
-        self._bias = offset[: self.size] * self._gain
+        gain = 1.0 / half_range[: self.size]
+        self._gain, self._bias = gain.tolist(), (offset[: self.size] * gain).tolist()
 
     def build(self, inputs: ObservationInputs, out: Optional[np.ndarray] = None) -> np.ndarray:
         """Return the float32 observation in [-1, 1]; raises ValueError on non-finite input."""
@@ -99,10 +100,14 @@ class ObservationBuilder:
         of the wrong length. Finite values outside their range are clipped to [-1, 1].
         """
         try:
-            if (len(joint_positions) != 6 or len(joint_velocities) != 6 or len(tcp_position) != 3
-                    or len(tcp_approach_axis) != 3 or len(object_position) != 3):
-                raise ValueError("observation inputs need 6 joint positions, 6 velocities and 3-D tcp "
-                                 "position, approach axis and object position")
+            lengths_ok = (len(joint_positions) == 6 and len(joint_velocities) == 6 and len(tcp_position) == 3
+                          and len(tcp_approach_axis) == 3 and len(object_position) == 3)
+        except TypeError:  # a scalar where a sequence belongs
+            lengths_ok = False
+        if not lengths_ok:
+            raise ValueError("observation inputs need 6 joint positions, 6 velocities and 3-D tcp "
+                             "position, approach axis and object position")
+        try:
             tcp_x, tcp_y, tcp_z = tcp_position
             object_x, object_y, object_z = object_position
             raw = [*joint_positions, *joint_velocities, gripper_width, gripper_command_width, tcp_x, tcp_y, tcp_z,
@@ -110,16 +115,19 @@ class ObservationBuilder:
             if self.include_lift:
                 raw.append(object_lift)
             finite = math.isfinite(sum(raw))  # a single NaN or inf makes the sum non-finite
-            scaled = np.array(raw, dtype=np.float64)
-        except TypeError as error:  # a scalar where a sequence belongs, a string, None, a nested array
+            values = []
+            if finite:
+                for value, gain, bias in zip(raw, self._gain, self._bias):
+                    value = value * gain - bias
+                    values.append(1.0 if value > 1.0 else (-1.0 if value < -1.0 else value))
+        except (TypeError, ValueError) as error:  # strings, None, arrays where numbers belong
             raise ValueError(f"observation inputs must be numbers and sequences of numbers: {error}") from None
         if not finite:
             raise ValueError("observation inputs contain NaN or inf")
-        scaled *= self._gain
-        scaled -= self._bias
-        np.minimum(scaled, 1.0, out=scaled)
-        np.maximum(scaled, -1.0, out=scaled)
+        observation = np.array(values, dtype=np.float32)
+        if observation.shape != (self.size,):  # e.g. (6, 1) arrays given for joint positions
+            raise ValueError(f"observation inputs must be flat sequences of numbers, got shape {observation.shape}")
         if out is None:
-            return scaled.astype(np.float32)
-        out[:] = scaled
+            return observation
+        out[:] = observation
         return out
