@@ -192,7 +192,8 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0)
     timed_actions = actions[warmup:]
 
     # Time spent in the world's physics stepping during env.step (diagnostic: the rest of the
-    # step is Python, observation and task code). Costs two perf_counter calls per step.
+    # step is Python, observation and task code). Taken in the recording run, so that the
+    # timed run carries no instrumentation.
     world_step = env.world.step
     physics_clock = [0.0]
 
@@ -205,15 +206,15 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0)
     for repeat in range(repeats):
         first_seed = seed + 100_000 * repeat
         run_seeded_episodes(env, actions[:warmup], first_seed + 50_000)  # warm-up, not timed
-        env.world.step = timed_world_step
-        physics_clock[0] = 0.0
         t0 = time.perf_counter()
         seeds = run_seeded_episodes(env, timed_actions, first_seed)
         env_s = time.perf_counter() - t0
+
+        env.world.step = timed_world_step
+        physics_clock[0] = 0.0
+        episodes = record_episodes(env, timed_actions, first_seed)
         physics_s = physics_clock[0]
         del env.world.step
-
-        episodes = record_episodes(env, timed_actions, first_seed)
         if [e["seed"] for e in episodes] != seeds or sum(len(e["commands"]) for e in episodes) != steps:
             raise RuntimeError("the recording run differs from the timed run: the environment is not deterministic")
         replay = replay_bare(env, episodes)

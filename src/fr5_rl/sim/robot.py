@@ -77,6 +77,7 @@ class FR5Robot:
         self._finger_velocity = robot.finger_velocity
         self._finger_step = robot.finger_velocity * float(sim_cfg["control_dt"])
         self._finger_target = robot.finger_travel
+        self._joint_damping: Optional[float] = None  # unknown until set
         for index in self.finger_joints:
             p.changeDynamics(self.body, index, maxJointVelocity=robot.finger_velocity, physicsClientId=client)
         for index, velocity in zip(self.arm_joints, robot.velocity_limits):
@@ -86,10 +87,9 @@ class FR5Robot:
     def reset(self, joint_positions: np.ndarray, opening_width: float) -> None:
         """Teleport to a configuration at rest and hold it (start of an episode)."""
         finger = opening_width / 2.0
-        for index, angle in zip(self.arm_joints, joint_positions):
-            p.resetJointState(self.body, index, float(angle), 0.0, physicsClientId=self.client)
-        for index in self.finger_joints:
-            p.resetJointState(self.body, index, finger, 0.0, physicsClientId=self.client)
+        positions = [[float(angle)] for angle in joint_positions] + [[finger]] * len(self.finger_joints)
+        p.resetJointStatesMultiDof(self.body, self.all_joints, positions, targetVelocities=[[0.0]] * len(positions),
+                                   physicsClientId=self.client)
         self._finger_target = finger
         self.command(joint_positions, opening_width)
 
@@ -112,8 +112,11 @@ class FR5Robot:
 
     def set_joint_damping(self, damping: float) -> None:
         """Viscous damping (N*m*s/rad) on every arm joint (domain randomisation)."""
+        if damping == self._joint_damping:
+            return  # six simulator calls saved at every reset of an env without randomisation
         for index in self.arm_joints:
             p.changeDynamics(self.body, index, jointDamping=float(damping), physicsClientId=self.client)
+        self._joint_damping = damping
 
     # ------------------------------------------------------------------ state
     def measure(self) -> Tuple[List[float], List[float], float, Tuple[float, ...], Tuple[float, ...]]:

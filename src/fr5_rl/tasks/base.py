@@ -86,23 +86,27 @@ class Task:
         minus the collision penalty and a small action-magnitude cost. Sparse mode pays only
         the bonus and the penalty.
         """
-        parts = {"success": self.success_bonus if outcome.success else 0.0}
-        parts["collision"] = -self.collision_penalty if outcome.failure == "collision" else 0.0
+        success = self.success_bonus if outcome.success else 0.0
+        collision = -self.collision_penalty if outcome.failure == "collision" else 0.0
         if self.sparse:
-            parts["progress"] = 0.0
-            parts["action"] = 0.0
-            return parts
-        potential = sum(self.weights[name] * value for name, value in outcome.terms.items())
+            return {"success": success, "collision": collision, "progress": 0.0, "action": 0.0}
+        potential = self.potential(outcome.terms)
         previous = potential if self._previous_potential is None else self._previous_potential
         self._previous_potential = potential
-        parts["progress"] = self.potential_gain * (potential - previous)
-        parts["action"] = -self.action_penalty * sum(value * value for value in action)
-        return parts
+        return {"success": success, "collision": collision,
+                "progress": self.potential_gain * (potential - previous),
+                "action": -self.action_penalty * sum([value * value for value in action])}
+
+    def potential(self, terms: Mapping[str, float]) -> float:
+        """The shaping potential: the weighted sum of the terms."""
+        weights, total = self.weights, 0.0
+        for name, value in terms.items():
+            total += weights[name] * value
+        return total
 
     def prime(self, state: TaskState) -> None:
         """Record the potential of the reset state, so the first step pays its own progress."""
-        terms = self.terms(state)
-        self._previous_potential = sum(self.weights[name] * value for name, value in terms.items())
+        self._previous_potential = self.potential(self.terms(state))
 
     @staticmethod
     def common_failure(state: TaskState) -> Optional[str]:
