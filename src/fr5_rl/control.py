@@ -78,8 +78,15 @@ class JointCommandShaper:
 
     def arm_target_list(self, action: Sequence[float], measured_joint_positions: Sequence[float]) -> List[float]:
         """:meth:`arm_targets` as a list of floats (what PyBullet and ROS messages take)."""
-        action = finite_values(action, ACTION_SIZE, "the action")
-        measured = finite_values(measured_joint_positions, self._n_joints, "the measured joint positions")
+        return self.targets_from_floats(
+            finite_values(action, ACTION_SIZE, "the action"),
+            finite_values(measured_joint_positions, self._n_joints, "the measured joint positions"),
+        )
+
+    def targets_from_floats(self, action: List[float], measured_joint_positions: List[float]) -> List[float]:
+        """:meth:`arm_target_list` without the input checks, for inputs known to be lists of
+        finite floats of the right lengths (the environments' step, which checked them)."""
+        measured = measured_joint_positions
         gain, keep = self._alpha * self._max_step, 1.0 - self._alpha
         filtered, targets = [], []
         # Conditional expressions rather than min/max calls: this loop runs in every step.

@@ -115,7 +115,9 @@ class FR5Env(gym.Env):
         values = [1.0 if value > 1.0 else (-1.0 if value < -1.0 else value) for value in values]
         applied = self._delayed(values)
         # The joint state measured by the last observation is still current: nothing moved since.
-        targets = self.shaper.arm_target_list(applied, self._state.joint_positions)
+        # Both lists hold finite floats (the observation refuses anything else), so the shaper's
+        # checks are not repeated.
+        targets = self.shaper.targets_from_floats(applied, self._state.joint_positions)
         self._gripper_command_width = self.shaper.gripper_width(applied)
         self.robot.command(targets, self._gripper_command_width)
         self.world.step()
