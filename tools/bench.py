@@ -139,7 +139,7 @@ def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False)
 
     client, substeps = env.world.client, env.world.substeps
     command, step_simulation, perf = env.robot.command, p.stepSimulation, time.perf_counter
-    body, joints, tcp, obj = env.robot.body, env.robot.all_joints, env.robot.tcp_link, env.world.object_id
+    body, joints, tcp = env.robot.body, env.robot.all_joints, env.robot.tcp_link
     get_joints, get_link, get_pose, get_contacts = (
         p.getJointStates, p.getLinkState, p.getBasePositionAndOrientation, p.getContactPoints)
     seconds, deviation = 0.0, 0.0

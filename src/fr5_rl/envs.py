@@ -70,8 +70,7 @@ class FR5Env(gym.Env):
             p.setCollisionFilterPair(self.robot.body, self.world.table_id, link, -1, 0,
                                      physicsClientId=self.world.client)
         obj = self.cfg["object"]
-        self._object_rest_height = 0.0
-        self._object_rest_z = float(self.cfg["table"]["top_height"])
+        self._object_rest_z = float(self.cfg["table"]["top_height"])  # set per episode with the object's size
         self._object_start: Tuple[float, float, float] = (0.0, 0.0, self._object_rest_z)
         self._gripper_command_width = self.robot_spec.max_opening_width
         self._action_queue: deque = deque()
@@ -90,8 +89,6 @@ class FR5Env(gym.Env):
         self._apply_randomisation(rng)
         low, high = np.asarray(self._object_cfg["region_low"]), np.asarray(self._object_cfg["region_high"])
         xy = rng.uniform(low, high) if not options or "object_xy" not in options else np.asarray(options["object_xy"])
-        table_top = float(self.cfg["table"]["top_height"])
-        self._object_rest_z = table_top + self._object_rest_height
         self._object_start = (float(xy[0]), float(xy[1]), self._object_rest_z)
         self.world.place_object(self._object_start, yaw=float(rng.uniform(-np.pi, np.pi)))
 
@@ -236,10 +233,11 @@ class FR5Env(gym.Env):
         friction = float(obj["lateral_friction"]) * (rng.uniform(*rnd["friction_scale"]) if on else 1.0)
         if obj["shape"] == "cylinder":
             dims = (float(obj["radius"]) * size, float(obj["height"]) * size)
-            self._object_rest_height = dims[1] / 2.0
+            half_height = dims[1] / 2.0
         else:
             dims = (float(obj["half_extent"]) * size,)
-            self._object_rest_height = dims[0]
+            half_height = dims[0]
+        self._object_rest_z = float(self.cfg["table"]["top_height"]) + half_height
         self.world.set_object(str(obj["shape"]), dims, mass, friction)
         self.robot.set_joint_damping(rng.uniform(*rnd["joint_damping"]) if on else 0.0)
         # The simulated position controller tracks differently at other physics steps: drawing

@@ -122,22 +122,26 @@ class FR5Robot:
     def measure(self) -> Tuple[List[float], List[float], float, Tuple[float, ...], Tuple[float, ...]]:
         """One read of the robot, in two simulator queries and plain floats (the step path).
 
-        Returns arm joint positions (rad) and velocities (rad/s) in controller order, the
-        gripper opening width (m), and the tcp position (m) and quaternion (x, y, z, w) in
+        Returns :meth:`joint_lists` and the tcp position (m) and quaternion (x, y, z, w) in
         base_link as the simulator computes them. Equal to
         :class:`fr5_rl.kinematics.ForwardKinematics` (the ROS node's FK) to < 1e-6 m; the test
         suite checks it.
         """
-        states = p.getJointStates(self.body, self.all_joints, physicsClientId=self.client)
+        positions, velocities, width = self.joint_lists()
         link = p.getLinkState(self.body, self.tcp_link, computeForwardKinematics=1, physicsClientId=self.client)
+        return positions, velocities, width, link[4], link[5]
+
+    def joint_lists(self) -> Tuple[List[float], List[float], float]:
+        """Measured arm positions (rad), velocities (rad/s), controller order, and gripper
+        opening width (m), as plain floats from one simulator query."""
+        states = p.getJointStates(self.body, self.all_joints, physicsClientId=self.client)
         positions, velocities, _, _ = zip(*states)  # each joint: position, velocity, forces, torque
         n_arm = self._n_arm
-        return (list(positions[:n_arm]), list(velocities[:n_arm]), sum(positions[n_arm:]),  # two fingers
-                link[4], link[5])
+        return list(positions[:n_arm]), list(velocities[:n_arm]), sum(positions[n_arm:])  # two fingers
 
     def joint_state(self) -> Tuple[np.ndarray, np.ndarray, float]:
-        """Measured arm positions (rad), velocities (rad/s) and gripper opening width (m)."""
-        positions, velocities, width, _, _ = self.measure()
+        """:meth:`joint_lists` as arrays."""
+        positions, velocities, width = self.joint_lists()
         return np.array(positions), np.array(velocities), width
 
     def tcp_pose_from_simulator(self) -> Tuple[np.ndarray, np.ndarray]:
