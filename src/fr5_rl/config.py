@@ -199,3 +199,14 @@ def validate_env_config(cfg: Mapping[str, Any], robot: RobotSpec) -> None:
     low, high = np.asarray(cfg["object"]["region_low"]), np.asarray(cfg["object"]["region_high"])
     if low.shape != (2,) or high.shape != (2,) or np.any(low >= high):
         raise ConfigError("object.region_low must be below object.region_high (x y, metres)")
+
+
+def object_rest_z(cfg: Mapping[str, Any], size_scale: float = 1.0) -> float:
+    """z (m, base_link) of the object's centre when it stands upright on the table.
+
+    :param cfg: the environment configuration (``config/env.yaml`` merged with overrides).
+    :param size_scale: the episode's object size factor (1.0 = nominal, as deployed).
+    """
+    obj = cfg["object"]
+    half_height = float(obj["height"]) / 2.0 if obj["shape"] == "cylinder" else float(obj["half_extent"])
+    return float(cfg["table"]["top_height"]) + half_height * size_scale
