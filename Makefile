@@ -47,4 +47,5 @@ lint: setup
 	@$(ENV) catkin_lint -W1 .
 
 clean:
-	rm -rf .venv .catkin_ws env.sh runs bench/results
+	@bash tools/setup.sh --clean
+	rm -rf runs bench/results

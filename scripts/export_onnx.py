@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
-"""Export a trained policy to ONNX with its normalisation folded in. Logic lives in fr5_rl.training.export_onnx."""
+"""`rosrun fr5_rl export_onnx.py --help`. The command line lives in fr5_rl.cli.export_onnx."""
 import sys
 
-from fr5_rl.training.export_onnx import main
+from fr5_rl.cli.export_onnx import main
 
 if __name__ == "__main__":
     sys.exit(main())

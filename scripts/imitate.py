@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
-"""Learn an FR5 policy from the scripted expert (DAgger). Logic lives in fr5_rl.training.imitation."""
+"""`rosrun fr5_rl imitate.py --help`. The command line lives in fr5_rl.cli.imitate."""
 import sys
 
-from fr5_rl.training.imitation import main
+from fr5_rl.cli.imitate import main
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
-"""Train a policy on an FR5 task: rosrun fr5_rl train.py --help. Logic lives in fr5_rl.training.train."""
+"""`rosrun fr5_rl train.py --help`. The command line lives in fr5_rl.cli.train."""
 import sys
 
-from fr5_rl.training.train import main
+from fr5_rl.cli.train import main
 
 if __name__ == "__main__":
     sys.exit(main())

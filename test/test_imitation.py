@@ -5,13 +5,14 @@ import json
 
 import numpy as np
 
-from fr5_rl.policy import load_policy
-from fr5_rl.training import export_onnx, imitation
+from fr5_rl.runtime.policy import load_policy
+from fr5_rl.cli import imitate
+from fr5_rl.training import imitation, onnx_export
 
 
 def test_tiny_dagger_run_gives_a_loadable_model(tmp_path):
     run = tmp_path / "run"
-    assert imitation.main(["--task", "grasp", "--rounds", "2", "--episodes", "3", "--epochs", "3",
+    assert imitate.main(["--task", "grasp", "--rounds", "2", "--episodes", "3", "--epochs", "3",
                            "--eval-episodes", "2", "--run-dir", str(run)]) == 0
     summary = json.loads((run / "summary.json").read_text())
     rounds = [h["round"] for h in summary["history"]]
@@ -22,8 +23,8 @@ def test_tiny_dagger_run_gives_a_loadable_model(tmp_path):
     assert policy.task == "grasp" and policy.observation_size == 24
     action = policy.act(np.zeros(24, dtype=np.float32))
     assert action.shape == (7,) and np.all(np.abs(action) <= 1.0)
-    export_onnx.export(run / "final")
-    assert export_onnx.parity(run / "final", 200) <= 1e-5
+    onnx_export.export(run / "final")
+    assert onnx_export.parity(run / "final", 200) <= 1e-5
 
 
 def test_fit_reduces_the_imitation_loss(tmp_path):
@@ -31,8 +32,8 @@ def test_fit_reduces_the_imitation_loss(tmp_path):
     observations = rng.uniform(-1, 1, (2000, 24)).astype(np.float32)
     labels = np.tanh(observations[:, :7] * 2.0)  # a learnable map
     normaliser = imitation.Normaliser(observations)
-    hyper = {"algo_kwargs": {"n_steps": 64, "batch_size": 64, "policy_kwargs": {"net_arch": {"pi": [64, 64], "vf": [64]}}}}
-    model, _ = imitation.build_model_and_stats("grasp", {}, hyper, normaliser, seed=0)
+    algo_kwargs = {"n_steps": 64, "batch_size": 64, "policy_kwargs": {"net_arch": {"pi": [64, 64], "vf": [64]}}}
+    model, _ = imitation.build_model_and_stats("grasp", {}, algo_kwargs, normaliser, seed=0)
     first = imitation.fit(model, normaliser, observations, labels, epochs=1)
     last = imitation.fit(model, normaliser, observations, labels, epochs=15)
     assert last < 0.5 * first

@@ -61,3 +61,31 @@ def test_no_machine_specific_absolute_paths_in_tracked_files():
         except UnicodeDecodeError:
             continue
     assert offenders == []
+
+
+# ----------------------------------------------------------------------------- the front door
+SCRIPTS = sorted(path.name for path in (ROOT / "scripts").glob("*.py"))
+
+
+@pytest.mark.parametrize("script", SCRIPTS)
+def test_rosrun_finds_each_script_exactly_once(script):
+    """`rosrun fr5_rl <script> --help` as a new user types it: a real shell that sources env.sh,
+    stdin closed (rosrun's "pick one of the following" menu would read it), no file-system loop."""
+    command = f"source '{ROOT / 'env.sh'}' && rosrun fr5_rl {script} --help"
+    result = subprocess.run(["bash", "-c", command], stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                            timeout=120, cwd="/")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert result.stdout.startswith("usage:") and script in result.stdout.splitlines()[0], result.stdout
+    for symptom in ("non-unique", "File system loop", "Couldn't find"):
+        assert symptom not in result.stdout + result.stderr, result.stdout + result.stderr
+
+
+def test_catkin_workspace_is_outside_the_package():
+    """rosrun searches the package directory with `find -L`: a workspace inside it holds a
+    second copy of every script (devel/) and a link back to the package (a loop)."""
+    result = subprocess.run(["bash", "-c", f"source '{ROOT / 'env.sh'}' && echo $FR5_RL_WORKSPACE && rospack find fr5_rl"],
+                            capture_output=True, text=True, timeout=60)
+    workspace, package = result.stdout.split()
+    assert Path(package).resolve() == ROOT
+    assert ROOT not in Path(workspace).resolve().parents and Path(workspace).resolve() != ROOT
+    assert not (ROOT / ".catkin_ws").exists()

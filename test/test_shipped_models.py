@@ -5,9 +5,9 @@ from pathlib import Path
 
 import pytest
 
-from fr5_rl.policy import load_policy
-from fr5_rl.training.evaluate import run_episodes
-from fr5_rl.training.export_onnx import parity
+from fr5_rl.runtime.policy import load_policy
+from fr5_rl.training.evaluation import run_episodes
+from fr5_rl.training.onnx_export import parity
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 GATES = {"reach": (50, 0.90), "grasp": (30, 0.85)}  # episodes, minimum success rate

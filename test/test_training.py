@@ -19,14 +19,15 @@ import numpy as np
 import pytest
 
 from fr5_rl.config import ConfigError, package_root
-from fr5_rl.training import evaluate, train
+from fr5_rl.cli import evaluate, train
+from fr5_rl.training import evaluation
 from fr5_rl.training.algorithms import check_hyperparameters, load_hyperparameters
-from fr5_rl.training.artifacts import ModelFilesError
+from fr5_rl.runtime.bundle import ModelFilesError
 
 REPO = Path(__file__).resolve().parent.parent
 TRAIN_SCRIPT = REPO / "scripts" / "train.py"
 # The same entry point as scripts/train.py, but passing main()'s return value to sys.exit.
-TRAIN_MODULE = ["-c", "import sys; from fr5_rl.training.train import main; sys.exit(main(sys.argv[1:]))"]
+TRAIN_MODULE = ["-c", "import sys; from fr5_rl.cli.train import main; sys.exit(main(sys.argv[1:]))"]
 
 FAST_PPO = """\
 n_timesteps: 20000
@@ -155,7 +156,7 @@ def test_short_ppo_run_writes_checkpoint(ppo_run):
     # no staging directories left behind
     assert not [p.name for p in (ppo_run / "checkpoints").iterdir() if p.name.startswith(".")]
     # The statistics are real running statistics, not the initial ones.
-    from fr5_rl.policy import load_normalizer
+    from fr5_rl.runtime.policy import load_normalizer
 
     normalizer = load_normalizer(latest)
     assert normalizer.obs_rms.count > 1000
@@ -276,7 +277,7 @@ def test_ppo_divisibility_check(tmp_path, capsys):
     data = load_hyperparameters("ppo", "reach", str(hyper))
     with pytest.raises(ConfigError, match="batch_size"):
         check_hyperparameters("ppo", data, 4)
-    data["algo_kwargs"]["batch_size"] = 80
+    data.algo_kwargs["batch_size"] = 80
     check_hyperparameters("ppo", data, 4)  # 400 % 80 == 0: accepted
 
 
@@ -286,20 +287,20 @@ def test_shipped_hyperparameters_pass_their_checks():
     assert ["ppo", "reach"] in shipped
     for algo, task in shipped:
         hyper = load_hyperparameters(algo, task)
-        check_hyperparameters(algo, hyper, int(hyper.get("n_envs", 2)))
-        assert int(hyper["n_timesteps"]) > 0
+        check_hyperparameters(algo, hyper, hyper.n_envs)
+        assert hyper.n_timesteps > 0
 
 
 def test_off_policy_batch_larger_than_buffer_refused(tmp_path):
     data = load_hyperparameters("sac", "reach", str(write(tmp_path / "sac.yaml", OFF_POLICY)))
-    data["algo_kwargs"]["batch_size"] = 5000
+    data.algo_kwargs["batch_size"] = 5000
     with pytest.raises(ConfigError, match="batch_size"):
         check_hyperparameters("sac", data, 1)
 
 
 # ----------------------------------------------------------------------------- loading
 def test_missing_statistics_refused(model_copy):
-    from fr5_rl.policy import load_policy
+    from fr5_rl.runtime.policy import load_policy
 
     (model_copy / "vecnormalize.pkl").unlink()
     for backend in ("torch", "onnx"):
@@ -308,7 +309,7 @@ def test_missing_statistics_refused(model_copy):
 
 
 def test_missing_directory_and_model_refused(model_copy, tmp_path):
-    from fr5_rl.policy import load_policy
+    from fr5_rl.runtime.policy import load_policy
 
     with pytest.raises(ModelFilesError):
         load_policy(tmp_path / "does_not_exist")
@@ -318,7 +319,7 @@ def test_missing_directory_and_model_refused(model_copy, tmp_path):
 
 
 def test_observation_size_mismatch_refused(model_copy):
-    from fr5_rl.policy import load_policy
+    from fr5_rl.runtime.policy import load_policy
 
     policy = load_policy(model_copy, "torch", expected_task="reach", expected_observation_size=23)
     assert policy.act(np.zeros(23, dtype=np.float32)).shape == (7,)
@@ -340,8 +341,8 @@ def test_observation_size_mismatch_refused(model_copy):
 
 
 def test_onnx_backend_needs_export_and_checks_size(model_copy):
-    from fr5_rl.policy import load_policy
-    from fr5_rl.training.export_onnx import export
+    from fr5_rl.runtime.policy import load_policy
+    from fr5_rl.training.onnx_export import export
 
     with pytest.raises(ModelFilesError, match="export_onnx"):
         load_policy(model_copy, "onnx")
@@ -356,14 +357,14 @@ def test_onnx_backend_needs_export_and_checks_size(model_copy):
 
 # ----------------------------------------------------------------------------- evaluation
 def test_wilson_interval():
-    assert evaluate.wilson_interval(0, 0) == (0.0, 1.0)
-    low, high = evaluate.wilson_interval(5, 10)
+    assert evaluation.wilson_interval(0, 0) == (0.0, 1.0)
+    low, high = evaluation.wilson_interval(5, 10)
     assert (low, high) == pytest.approx((0.2366, 0.7634), abs=1e-4)
-    low, high = evaluate.wilson_interval(10, 10)
+    low, high = evaluation.wilson_interval(10, 10)
     assert low == pytest.approx(0.7225, abs=1e-4) and high == pytest.approx(1.0, abs=1e-12)
-    low, high = evaluate.wilson_interval(0, 10)
+    low, high = evaluation.wilson_interval(0, 10)
     assert low == pytest.approx(0.0, abs=1e-12) and high == pytest.approx(0.2775, abs=1e-4)
-    low, high = evaluate.wilson_interval(190, 200)
+    low, high = evaluation.wilson_interval(190, 200)
     assert low == pytest.approx(0.9104, abs=1e-4) and high == pytest.approx(0.9726, abs=1e-4)
 
 
@@ -372,7 +373,7 @@ def check_eval_outputs(out: Path, episodes: int) -> dict:
     assert summary["episodes"] == episodes
     successes = summary["successes"]
     assert summary["success_rate"] == pytest.approx(successes / episodes)
-    low, high = evaluate.wilson_interval(successes, episodes)
+    low, high = evaluation.wilson_interval(successes, episodes)
     assert summary["success_rate_95ci"] == pytest.approx([round(low, 4), round(high, 4)])
     assert summary["success_rate_95ci"][0] <= summary["success_rate"] <= summary["success_rate_95ci"][1]
     with open(out.with_suffix(".csv"), newline="", encoding="utf-8") as stream:
@@ -411,7 +412,7 @@ def test_evaluate_refuses_incomplete_model(model_copy, tmp_path, capsys):
 
 # ----------------------------------------------------------------------------- ONNX export
 def test_onnx_parity(model_copy):
-    from fr5_rl.training.export_onnx import export, parity
+    from fr5_rl.training.onnx_export import export, parity
 
     path = export(model_copy)
     assert path == model_copy / "model.onnx" and path.stat().st_size > 0
@@ -423,7 +424,7 @@ def test_onnx_parity_detects_a_wrong_graph(model_copy):
     """The parity check can fail: export, then change the statistics under the graph."""
     import pickle
 
-    from fr5_rl.training.export_onnx import export, parity
+    from fr5_rl.training.onnx_export import export, parity
 
     export(model_copy)
     with open(model_copy / "vecnormalize.pkl", "rb") as stream:
@@ -438,7 +439,7 @@ def test_onnx_parity_detects_a_wrong_graph(model_copy):
 # ----------------------------------------------------------------------------- off-policy algorithms
 @pytest.mark.parametrize("algo", ["sac", "td3", "tqc"])
 def test_off_policy_short_run(algo, tmp_path):
-    from fr5_rl.training.export_onnx import export, parity
+    from fr5_rl.training.onnx_export import export, parity
 
     run_dir = tmp_path / "run"
     hyper = write(tmp_path / f"{algo}.yaml", OFF_POLICY)

@@ -9,7 +9,8 @@ repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # Runnable on its own too: enter the environment that tools/setup.sh made.
 set +u; source "$repo/env.sh"; set -u
 cd "$repo"
-results="$repo/.catkin_ws/test_results_all"
+ws="$FR5_RL_WORKSPACE"
+results="$ws/test_results_all"
 rm -rf "$results" && mkdir -p "$results"
 
 echo "== pytest =="
@@ -17,16 +18,16 @@ python -m pytest -q test/ --junitxml="$results/pytest.xml"
 pytest_rc=$?
 
 echo "== rostest (catkin run_tests) =="
-rm -rf .catkin_ws/build/test_results
-( cd .catkin_ws && catkin_make run_tests -j1 > build/run_tests.log 2>&1 )
-grep -E "^\[ROSTEST\]|RESULT|FAILURE|ERROR:|\[ROSUNIT\]" .catkin_ws/build/run_tests.log | grep -v "^\s*$" | tail -40
-catkin_test_results .catkin_ws/build/test_results/fr5_rl
+rm -rf "$ws/build/test_results"
+( cd "$ws" && catkin_make run_tests -j1 > build/run_tests.log 2>&1 )
+grep -E "^\[ROSTEST\]|RESULT|FAILURE|ERROR:|\[ROSUNIT\]" "$ws/build/run_tests.log" | grep -v "^\s*$" | tail -40
+catkin_test_results "$ws/build/test_results/fr5_rl"
 catkin_rc=$?
-cp -r .catkin_ws/build/test_results/fr5_rl "$results/catkin" 2>/dev/null
+cp -r "$ws/build/test_results/fr5_rl" "$results/catkin" 2>/dev/null
 
 python tools/test_summary.py "$results"
 summary_rc=$?
 if [ $pytest_rc -ne 0 ] || [ $catkin_rc -ne 0 ] || [ $summary_rc -ne 0 ]; then
-  echo "make test: FAILED (pytest rc=$pytest_rc, rostest rc=$catkin_rc); rostest log: .catkin_ws/build/run_tests.log" >&2
+  echo "make test: FAILED (pytest rc=$pytest_rc, rostest rc=$catkin_rc); rostest log: $ws/build/run_tests.log" >&2
   exit 1
 fi

@@ -6,10 +6,12 @@ environments and the ROS nodes see the same numbers.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import os
+import typing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Dict, Mapping, Optional
+from typing import Any, Dict, List, Mapping, Optional, Type, TypeVar
 
 import numpy as np
 import yaml
@@ -210,3 +212,240 @@ def object_rest_z(cfg: Mapping[str, Any], size_scale: float = 1.0) -> float:
     obj = cfg["object"]
     half_height = float(obj["height"]) / 2.0 if obj["shape"] == "cylinder" else float(obj["half_extent"])
     return float(cfg["table"]["top_height"]) + half_height * size_scale
+
+
+# ---------------------------------------------------------------------------------------------
+# Typed loaders: one dataclass per kind of file. Defaults live in the YAML files only; the
+# loaders refuse unknown keys, missing keys and wrong types, naming the key's path.
+
+T = TypeVar("T")
+
+
+def _join(path: str, key: str) -> str:
+    return f"{path}.{key}" if path else str(key)
+
+
+def _coerce(kind: Any, value: Any, source: str, path: str) -> Any:
+    """``value`` checked against the annotation ``kind`` (bool, int, float, str, List, Dict,
+    Optional, Any or a dataclass)."""
+    origin, args = typing.get_origin(kind), typing.get_args(kind)
+
+    def wrong(expected: str) -> ConfigError:
+        return ConfigError(f"{source}: '{path}' must be {expected}, got {value!r}")
+
+    if kind is Any:
+        return value
+    if origin is typing.Union:  # Optional[X]
+        if value is None and type(None) in args:
+            return None
+        (inner,) = [arg for arg in args if arg is not type(None)]
+        return _coerce(inner, value, source, path)
+    if dataclasses.is_dataclass(kind):
+        return typed(kind, value, source, path)
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise wrong("true or false")
+        return value
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise wrong("an integer")
+        return value
+    if kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise wrong("a number")
+        return float(value)
+    if kind is str:
+        if not isinstance(value, str):
+            raise wrong("a string")
+        return value
+    if origin in (list, List):
+        if not isinstance(value, (list, tuple)):
+            raise wrong("a list")
+        return [_coerce(args[0] if args else Any, item, source, f"{path}[{index}]")
+                for index, item in enumerate(value)]
+    if origin in (dict, Dict):
+        if not isinstance(value, Mapping):
+            raise wrong("a mapping")
+        return {key: _coerce(args[1] if args else Any, item, source, _join(path, key)) for key, item in value.items()}
+    raise TypeError(f"unsupported annotation {kind!r} at {path}")  # pragma: no cover - a bug in a schema
+
+
+def typed(cls: Type[T], data: Any, source: str, path: str = "") -> T:
+    """Build the dataclass ``cls`` from a mapping, refusing unknown or missing keys and wrong
+    types; the message names ``source`` and the key's dotted path. A ``check(source)`` method of
+    the dataclass then validates values."""
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{source}: '{path or '(top level)'}' must be a mapping, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    names = [field.name for field in dataclasses.fields(cls)]
+    unknown = [key for key in data if key not in names]
+    if unknown:
+        raise ConfigError(f"{source}: unknown key '{_join(path, unknown[0])}'; known keys"
+                          f"{' under ' + repr(path) if path else ''}: {', '.join(names)}")
+    missing = [name for name in names if name not in data]
+    if missing:
+        raise ConfigError(f"{source}: missing key '{_join(path, missing[0])}'")
+    instance = cls(**{name: _coerce(hints[name], data[name], source, _join(path, name)) for name in names})
+    check = getattr(instance, "check", None)
+    if check is not None:
+        check(source)
+    return instance
+
+
+def load_typed(cls: Type[T], path_or_name: str | Path) -> T:
+    """``typed(cls, ...)`` of a YAML file (a path, or a name in ``config/``)."""
+    path = Path(path_or_name)
+    source = str(path if path.is_file() else config_path(str(path_or_name)).relative_to(package_root()))
+    return typed(cls, load_yaml(path_or_name), source)
+
+
+def _positive(source: str, **values: float) -> None:
+    for name, value in values.items():
+        if not value > 0:
+            raise ConfigError(f"{source}: '{name}' must be positive, got {value}")
+
+
+@dataclass(frozen=True)
+class PolicyNodeParams:
+    """``config/policy_node.yaml``: the policy node's ~private parameters."""
+
+    model_dir: str
+    backend: str
+    rate: float
+    base_frame: str
+    joint_state_timeout: float
+    target_timeout: float
+    joint_states_topic: str
+    target_topic: str
+    command_topic: str
+    gripper_command_topic: str
+    command_gripper: bool
+    enabled: bool
+
+    def check(self, source: str) -> None:
+        if self.backend not in ("torch", "onnx"):
+            raise ConfigError(f"{source}: 'backend' must be torch or onnx, got {self.backend!r}")
+        _positive(source, rate=self.rate, joint_state_timeout=self.joint_state_timeout,
+                  target_timeout=self.target_timeout)
+
+
+@dataclass(frozen=True)
+class SimNodeParams:
+    """``config/sim_node.yaml``: the simulator node's ~private parameters."""
+
+    task: str
+    seed: int
+    episodes: int
+    publish_rate: float
+    physics_dt: float
+    solver_iterations: int
+    camera_rate: float
+    camera_frame: str
+    camera_noise_std: float
+    marker_rate: float
+    pause_between_episodes: float
+    joint_states_topic: str
+    command_topic: str
+    gripper_command_topic: str
+    target_topic: str
+
+    def check(self, source: str) -> None:
+        if self.task not in ("reach", "grasp"):
+            raise ConfigError(f"{source}: 'task' must be reach or grasp, got {self.task!r}")
+        _positive(source, publish_rate=self.publish_rate, physics_dt=self.physics_dt, camera_rate=self.camera_rate,
+                  marker_rate=self.marker_rate, solver_iterations=self.solver_iterations)
+        if self.episodes < 0 or self.camera_noise_std < 0 or self.pause_between_episodes < 0:
+            raise ConfigError(f"{source}: episodes, camera_noise_std and pause_between_episodes must be >= 0")
+
+
+@dataclass(frozen=True)
+class StaticTransform:
+    """One fixed frame: ``child`` in ``parent``, xyz (m) and URDF roll-pitch-yaw (rad)."""
+
+    parent: str
+    child: str
+    xyz: List[float]
+    rpy: List[float]
+
+
+@dataclass(frozen=True)
+class StaticTransforms:
+    """``config/static_transforms.yaml``: every transform published on /tf_static."""
+
+    transforms: List[StaticTransform]
+
+    def check(self, source: str) -> None:
+        for index, item in enumerate(self.transforms):
+            if len(item.xyz) != 3 or len(item.rpy) != 3 or not np.all(np.isfinite(item.xyz + item.rpy)):
+                raise ConfigError(f"{source}: 'transforms[{index}]' ({item.parent} -> {item.child}): "
+                                  "xyz and rpy need 3 finite values each")
+        children = [item.child for item in self.transforms]
+        if len(set(children)) != len(children):
+            raise ConfigError(f"{source}: a child frame appears twice (tf allows one parent per frame)")
+
+
+@dataclass(frozen=True)
+class NormalizeSettings:
+    """VecNormalize settings of a hyperparameter file."""
+
+    norm_obs: bool
+    norm_reward: bool
+    clip_obs: float
+
+
+@dataclass(frozen=True)
+class Hyperparameters:
+    """``config/<algo>_<task>.yaml`` (rl-zoo style): everything a training run is made of.
+
+    ``env`` is merged over ``config/env.yaml`` (its keys are checked there); ``algo_kwargs`` go
+    to the Stable-Baselines3 constructor (their names are checked against it by training).
+    """
+
+    n_timesteps: int
+    n_envs: int
+    normalize: NormalizeSettings
+    env: Dict[str, Any]
+    algo_kwargs: Dict[str, Any]
+
+    def check(self, source: str) -> None:
+        _positive(source, n_timesteps=self.n_timesteps, n_envs=self.n_envs)
+        try:
+            load_env_config(self.env)
+        except ConfigError as error:
+            raise ConfigError(f"{source}: 'env': {error}") from None
+
+    def to_dict(self) -> Dict[str, Any]:
+        """Plain JSON-able form (saved in a run's config.json; ``typed`` reads it back)."""
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class DaggerSettings:
+    """The ``dagger`` section of ``config/dagger_<task>.yaml``."""
+
+    rounds: int
+    episodes: int
+    epochs: int
+    learning_rate: float
+    expert_share_decay: float
+
+    def check(self, source: str) -> None:
+        _positive(source, rounds=self.rounds, episodes=self.episodes, epochs=self.epochs,
+                  learning_rate=self.learning_rate)
+        if not 0.0 <= self.expert_share_decay <= 1.0:
+            raise ConfigError(f"{source}: 'dagger.expert_share_decay' must be in [0, 1]")
+
+
+@dataclass(frozen=True)
+class DaggerConfig:
+    """``config/dagger_<task>.yaml``: DAgger rounds, the env variant, the network that holds it."""
+
+    dagger: DaggerSettings
+    env: Dict[str, Any]
+    algo_kwargs: Dict[str, Any]
+
+    def check(self, source: str) -> None:
+        try:
+            load_env_config(self.env)
+        except ConfigError as error:
+            raise ConfigError(f"{source}: 'env': {error}") from None

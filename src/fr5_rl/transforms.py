@@ -6,7 +6,7 @@ from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 
-from .config import ConfigError, load_yaml
+from .config import ConfigError, StaticTransforms, load_typed
 from .kinematics import rotation_from_rpy
 
 
@@ -64,23 +64,11 @@ def matrix_from_quaternion(xyz, quaternion) -> np.ndarray:
 
 
 def load_static_transforms(path: str | Path = "static_transforms") -> List[Dict]:
-    """Entries of ``config/static_transforms.yaml``: dicts with parent, child, matrix (4x4)."""
-    data = load_yaml(path)
-    entries = []
-    for index, item in enumerate(data.get("transforms", [])):
-        try:
-            parent, child = str(item["parent"]), str(item["child"])
-            xyz, rpy = [float(v) for v in item["xyz"]], [float(v) for v in item["rpy"]]
-        except (KeyError, TypeError, ValueError) as error:
-            raise ConfigError(f"static_transforms entry {index} needs parent, child, xyz[3], rpy[3]: {error}") from None
-        if len(xyz) != 3 or len(rpy) != 3 or not np.all(np.isfinite(xyz + rpy)):
-            raise ConfigError(f"static_transforms entry {index} ({parent} -> {child}): xyz and rpy need 3 finite values")
-        entries.append({"parent": parent, "child": child, "xyz": xyz, "rpy": rpy,
-                        "matrix": matrix_from_xyz_rpy(xyz, rpy)})
-    children = [e["child"] for e in entries]
-    if len(set(children)) != len(children):
-        raise ConfigError("static_transforms: a child frame appears twice (tf allows one parent per frame)")
-    return entries
+    """Entries of ``config/static_transforms.yaml`` (or ``path``), checked by
+    :class:`~fr5_rl.config.StaticTransforms`: dicts with parent, child, xyz, rpy, matrix (4x4)."""
+    table = load_typed(StaticTransforms, path)
+    return [{"parent": item.parent, "child": item.child, "xyz": item.xyz, "rpy": item.rpy,
+             "matrix": matrix_from_xyz_rpy(item.xyz, item.rpy)} for item in table.transforms]
 
 
 def transform_in(entries: List[Dict], parent: str, child: str) -> np.ndarray:

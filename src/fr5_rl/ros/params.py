@@ -1,14 +1,43 @@
-"""~private parameters with their defaults from config/<node>.yaml (one place for defaults)."""
+"""~private parameters of a node, typed, with their defaults from config/<node>.yaml only."""
 from __future__ import annotations
 
-from typing import Any, Dict
+from typing import Type, TypeVar
 
 import rospy
 
-from ..config import load_yaml
+from ..config import ConfigError, load_yaml, typed
+
+T = TypeVar("T")
 
 
-def node_parameters(config_name: str) -> Dict[str, Any]:
-    """Every key of ``config/<config_name>.yaml``, overridden by the node's ~private params."""
+def node_parameters(cls: Type[T], config_name: str) -> T:
+    """``config/<config_name>.yaml`` overridden by the node's ~private parameters, as ``cls``.
+
+    A ~private parameter the file does not know (a typo in a launch file) is refused, as is a
+    value of the wrong type; the error names the parameter.
+    """
     defaults = load_yaml(config_name)
-    return {key: rospy.get_param(f"~{key}", value) for key, value in defaults.items()}
+    private = rospy.get_name().rstrip("/") + "/"
+    given = sorted(name[len(private):] for name in rospy.get_param_names() if name.startswith(private))
+    unknown = [name for name in given if name.split("/")[0] not in defaults]
+    if unknown:
+        raise ConfigError(f"unknown parameter ~{unknown[0]}; {rospy.get_name()} takes: {', '.join(defaults)} "
+                          f"(defaults in config/{config_name}.yaml)")
+    values = {key: rospy.get_param(f"~{key}", value) for key, value in defaults.items()}
+    return typed(cls, values, f"{rospy.get_name()} parameters (defaults: config/{config_name}.yaml)")
+
+
+def exit_if_help_asked(program: str, summary: str, config_name: str = "") -> None:
+    """``rosrun fr5_rl <program> --help``: print the node's usage and its ~private parameters
+    with their defaults (from ``config/<config_name>.yaml``), then exit 0 without a ROS master."""
+    import sys
+
+    if not any(arg in ("-h", "--help") for arg in sys.argv[1:]):
+        return
+    lines = [f"usage: rosrun fr5_rl {program} [_param:=value ...] [topic:=remapped ...]", "", summary.strip()]
+    if config_name:
+        lines += ["", f"~private parameters (defaults: config/{config_name}.yaml):"]
+        lines += [f"  _{key}:={str(value).lower() if isinstance(value, bool) else value}"
+                  for key, value in load_yaml(config_name).items()]
+    print("\n".join(lines))
+    sys.exit(0)

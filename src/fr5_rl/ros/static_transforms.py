@@ -15,6 +15,7 @@ from geometry_msgs.msg import TransformStamped
 
 from ..config import ConfigError
 from ..transforms import load_static_transforms, quaternion_from_matrix
+from .params import exit_if_help_asked
 
 
 def to_messages(entries, stamp) -> list:
@@ -35,6 +36,8 @@ def to_messages(entries, stamp) -> list:
 
 
 def main() -> None:
+    exit_if_help_asked("static_transforms_node.py", __doc__.split("\n\n")[0] + "\n\n~config: a path or a name in "
+                       "config/ (default: static_transforms)")
     rospy.init_node("static_transforms")
     path = rospy.get_param("~config", "static_transforms")
     try:

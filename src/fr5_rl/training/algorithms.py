@@ -1,40 +1,44 @@
-"""Algorithm registry and hyperparameter files (``config/<algo>_<task>.yaml``, rl-zoo style)."""
+"""Hyperparameter files (``config/<algo>_<task>.yaml``, rl-zoo style) and their checks."""
 from __future__ import annotations
 
-from typing import Any, Dict, Type
+import inspect
+from pathlib import Path
+from typing import List, Optional
 
-from ..config import ConfigError, load_yaml
+from ..config import ConfigError, Hyperparameters, load_typed
+from ..runtime.bundle import algorithm_class
 
-
-def algorithm_class(name: str) -> Type:
-    """SB3 (or sb3-contrib) class for ``ppo``, ``sac``, ``td3`` or ``tqc``."""
-    name = name.lower()
-    if name in ("ppo", "sac", "td3"):
-        import stable_baselines3
-
-        return getattr(stable_baselines3, name.upper())
-    if name == "tqc":
-        from sb3_contrib import TQC
-
-        return TQC
-    raise ConfigError(f"unknown algorithm '{name}'; choose ppo, sac, td3 or tqc")
+# Constructor arguments the trainer sets itself: a hyperparameter file must not.
+TRAINER_OWNED = ("env", "seed", "device", "tensorboard_log", "verbose", "_init_setup_model")
 
 
-def load_hyperparameters(algo: str, task: str, path: str | None = None) -> Dict[str, Any]:
-    """Read the hyperparameter file and fill defaults; validated by :func:`check_hyperparameters`."""
-    data = load_yaml(path or f"{algo}_{task}")
-    data.setdefault("algo_kwargs", {})
-    data.setdefault("normalize", {"norm_obs": True, "norm_reward": False})
-    data.setdefault("env", {})
-    data.setdefault("n_timesteps", 1_000_000)
-    return data
+def hyperparameter_source(algo: str, task: str, path: Optional[str | Path] = None) -> str | Path:
+    """The file to read: ``path`` when given, else ``config/<algo>_<task>.yaml``."""
+    return path or f"{algo}_{task}"
 
 
-def check_hyperparameters(algo: str, hyper: Dict[str, Any], n_envs: int) -> None:
-    """Catch configuration errors before any training time is spent."""
-    kwargs = hyper["algo_kwargs"]
+def load_hyperparameters(algo: str, task: str, path: Optional[str | Path] = None) -> Hyperparameters:
+    """Read and type-check a hyperparameter file; :func:`check_hyperparameters` checks the rest."""
+    return load_typed(Hyperparameters, hyperparameter_source(algo, task, path))
+
+
+def check_hyperparameters(algo: str, hyper: Hyperparameters, n_envs: int, source: str = "hyperparameters") -> List[str]:
+    """Catch configuration errors before any training time is spent; returns warnings.
+
+    :raises ConfigError: an ``algo_kwargs`` name the algorithm does not take, or settings that
+        cannot work together (e.g. a PPO batch size that does not divide the rollout).
+    """
+    kwargs = hyper.algo_kwargs
     if n_envs < 1:
         raise ConfigError("--n-envs must be at least 1")
+    accepted = [name for name in inspect.signature(algorithm_class(algo).__init__).parameters if name != "self"]
+    for name in kwargs:
+        if name in TRAINER_OWNED:
+            raise ConfigError(f"{source}: 'algo_kwargs.{name}' is set by train.py itself; remove it "
+                              "(use --seed for the seed)")
+        if name not in accepted:
+            raise ConfigError(f"{source}: unknown key 'algo_kwargs.{name}' for {algo.upper()}; it takes: "
+                              + ", ".join(n for n in accepted if n not in TRAINER_OWNED))
     if algo == "ppo":
         n_steps = int(kwargs.get("n_steps", 2048))
         batch_size = int(kwargs.get("batch_size", 64))
@@ -51,9 +55,9 @@ def check_hyperparameters(algo: str, hyper: Dict[str, Any], n_envs: int) -> None
     else:
         if int(kwargs.get("batch_size", 256)) > int(kwargs.get("buffer_size", 1_000_000)):
             raise ConfigError(f"{algo.upper()} batch_size must not exceed buffer_size")
-    if hyper["normalize"].get("norm_reward", False) and algo == "ppo":
+    warnings = []
+    if hyper.normalize.norm_reward and algo == "ppo":
         # Allowed, but the seed's pitfall 2 (reward scale drifting mid-run) is worth a warning.
-        hyper.setdefault("_warnings", []).append(
-            "normalize.norm_reward is on: its running std can blow up after a burst of "
-            "collisions; the shipped configs keep it off"
-        )
+        warnings.append("normalize.norm_reward is on: its running std can blow up after a burst of "
+                        "collisions; the shipped configs keep it off")
+    return warnings

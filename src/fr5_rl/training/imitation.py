@@ -1,4 +1,4 @@
-"""``rosrun fr5_rl imitate.py``: learn a policy from the scripted expert with DAgger.
+"""DAgger from the scripted expert: what ``rosrun fr5_rl imitate.py`` runs.
 
 Behaviour cloning alone copies the expert on the states the expert visits, and drifts once
 the learner's own small errors take it elsewhere. DAgger (Ross et al., 2011) fixes that: each
@@ -14,16 +14,15 @@ export_onnx.py and the ROS node take it like any trained model.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Tuple
 
 import numpy as np
 
-from ..config import load_yaml
-from .artifacts import save_model_dir, write_json_atomic
-from .train import EVAL_SEED_OFFSET, machine_description
+from ..config import DaggerConfig, load_typed, load_yaml
+from ..runtime.bundle import build_meta, machine_description, save_model_dir, write_json_atomic
+from .train import EVAL_SEED_OFFSET
 
 
 def rollouts(env, expert, learner, episodes: int, seed: int, expert_probability: float,
@@ -106,7 +105,8 @@ def make_learner(model, normaliser: Normaliser):
     return act
 
 
-def build_model_and_stats(task: str, env_overrides: Dict[str, Any], hyper: Dict[str, Any], normaliser: Normaliser, seed: int):
+def build_model_and_stats(task: str, env_overrides: Dict[str, Any], algo_kwargs: Dict[str, Any],
+                          normaliser: Normaliser, seed: int):
     """An SB3 PPO model of the configured architecture and a VecNormalize holding our stats."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
@@ -115,7 +115,7 @@ def build_model_and_stats(task: str, env_overrides: Dict[str, Any], hyper: Dict[
 
     venv = VecNormalize(DummyVecEnv([lambda: FR5Env(task=task, config=env_overrides)]), norm_obs=True,
                         norm_reward=False, clip_obs=normaliser.clip, epsilon=normaliser.epsilon)
-    kwargs = dict(hyper["algo_kwargs"])
+    kwargs = dict(algo_kwargs)
     kwargs.pop("policy", None)
     model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **kwargs)
     return model, venv
@@ -138,36 +138,24 @@ def evaluate(env, learner, episodes: int, seed: int) -> float:
     return successes / max(episodes, 1)
 
 
-def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    parser.add_argument("--task", choices=["reach", "grasp"], default="grasp")
-    parser.add_argument("--hyperparams", default=None, help="architecture/env YAML (default: config/dagger_<task>.yaml)")
-    parser.add_argument("--run-dir", type=Path, default=None)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--rounds", type=int, default=None, help="DAgger rounds after the expert round")
-    parser.add_argument("--episodes", type=int, default=None, help="episodes per round")
-    parser.add_argument("--epochs", type=int, default=None, help="fitting epochs per round")
-    parser.add_argument("--eval-episodes", type=int, default=50)
-    parser.add_argument("--torch-threads", type=int, default=1)
-    return parser.parse_args(argv)
+def run_dagger(args: argparse.Namespace) -> int:
+    """Run DAgger as the command line asks (see :mod:`fr5_rl.cli.imitate`); returns 0.
 
-
-def main(argv: Optional[List[str]] = None) -> int:
+    :raises ConfigError: the DAgger file is malformed.
+    """
     import torch
 
     from ..envs import FR5Env
     from ..expert import ScriptedExpert
 
     t_start = time.time()
-    args = parse_args(argv if argv is not None else [a for a in sys.argv[1:] if not a.startswith("__")])
     torch.set_num_threads(args.torch_threads)
-    hyper = load_yaml(args.hyperparams or f"dagger_{args.task}")
-    dagger = hyper.get("dagger", {})
-    rounds = args.rounds if args.rounds is not None else int(dagger.get("rounds", 8))
-    episodes = args.episodes or int(dagger.get("episodes", 100))
-    epochs = args.epochs or int(dagger.get("epochs", 20))
-    env_overrides = hyper.get("env", {})
+    config = load_typed(DaggerConfig, args.hyperparams or f"dagger_{args.task}")
+    dagger = config.dagger
+    rounds = args.rounds if args.rounds is not None else dagger.rounds
+    episodes = args.episodes or dagger.episodes
+    epochs = args.epochs or dagger.epochs
+    env_overrides = config.env
     run_dir = args.run_dir or Path("runs") / f"{args.task}_dagger_{time.strftime('%Y%m%d-%H%M%S')}"
     run_dir.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(args.seed)
@@ -188,19 +176,17 @@ def main(argv: Optional[List[str]] = None) -> int:
     for round_index in range(1, rounds + 1):
         normaliser = Normaliser(observations)
         if model is None:
-            model, venv = build_model_and_stats(args.task, env_overrides, hyper, normaliser, args.seed)
+            model, venv = build_model_and_stats(args.task, env_overrides, config.algo_kwargs, normaliser, args.seed)
         loss = fit(model, normaliser, observations, labels, epochs, seed=args.seed + round_index,
-                   learning_rate=float(dagger.get("learning_rate", 1e-3)))
+                   learning_rate=dagger.learning_rate)
         learner = make_learner(model, normaliser)
         rates = {name: evaluate(e, learner, args.eval_episodes, args.seed + EVAL_SEED_OFFSET)
                  for name, e in eval_envs.items()}
         success = sum(rates.values()) / len(rates)
         sync_stats(venv, normaliser)
-        meta = {"task": args.task, "algo": "ppo", "trained_by": "dagger", "env_overrides": env_overrides,
-                "env_config": env.cfg, "robot_config": load_yaml("robot"),
-                "observation_size": int(env.observation_space.shape[0]), "action_size": 7,
-                "control_dt": env.control_dt, "seed": args.seed, "num_timesteps": int(len(observations)),
-                "dagger_round": round_index}
+        meta = build_meta(args.task, "ppo", env_overrides, env.cfg, load_yaml("robot"), env.observation_space.shape[0],
+                          env.action_space.shape[0], env.control_dt, args.seed, trained_by="dagger",
+                          num_timesteps=int(len(observations)), dagger_round=round_index)
         if success > best[0]:
             best = (success, round_index)
             save_model_dir(run_dir / "best", model, venv, meta)
@@ -218,7 +204,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         if round_index == rounds:
             break
         # The learner drives (with a decaying share of expert steps), the expert labels.
-        beta = float(dagger.get("expert_share_decay", 0.5)) ** round_index
+        beta = dagger.expert_share_decay ** round_index
         new_obs, new_labels, _ = rollouts(env, expert, learner, episodes, args.seed + 1000 * round_index, beta, rng)
         observations = np.concatenate([observations, new_obs])
         labels = np.concatenate([labels, new_labels])

@@ -1,10 +1,4 @@
-"""``rosrun fr5_rl train.py``: train an FR5 policy with Stable-Baselines3.
-
-Examples::
-
-    rosrun fr5_rl train.py --task reach                   # PPO, config/ppo_reach.yaml
-    rosrun fr5_rl train.py --task grasp --algo tqc --n-envs 2 --timesteps 300000
-    rosrun fr5_rl train.py --resume --run-dir runs/reach_ppo_20261122-1300
+"""Training an FR5 policy with Stable-Baselines3: what ``rosrun fr5_rl train.py`` runs.
 
 A run directory holds ``config.json`` (everything needed to resume), ``checkpoints/latest``
 (model + normalisation stats, replaced atomically every ``--checkpoint-freq`` steps),
@@ -15,8 +9,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import sys
 import time
 from collections import defaultdict
@@ -25,27 +17,13 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from ..config import ConfigError, load_yaml
-from .algorithms import algorithm_class, check_hyperparameters, load_hyperparameters
-from .artifacts import MODEL_FILE, STATS_FILE, recover_model_dir, save_model_dir, write_json_atomic
+from ..config import ConfigError, Hyperparameters, load_yaml, typed
+from ..runtime.bundle import (MODEL_FILE, STATS_FILE, algorithm_class, build_meta, check_sb3_zip, damaged,
+                              machine_description, recover_model_dir, save_model_dir, write_json_atomic)
+from .algorithms import check_hyperparameters, hyperparameter_source, load_hyperparameters
 
 REPLAY_FILE = "replay_buffer.pkl"
 EVAL_SEED_OFFSET = 10_000  # evaluation seeds never overlap training seeds
-
-
-def machine_description() -> Dict[str, Any]:
-    """What the figures were measured on."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo", "r", encoding="utf-8") as stream:
-            for line in stream:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
-            "platform": platform.platform()}
 
 
 def make_env_factory(task: str, env_overrides: Dict[str, Any], seed: int, rank: int,
@@ -211,51 +189,15 @@ def close_vec_env(venv, interrupted: bool) -> None:
     venv.close()
 
 
-def parser_defaults() -> Dict[str, Any]:
-    """Default value of every command-line option."""
-    return vars(build_parser().parse_args([]))
+def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any]) -> int:
+    """Run (or resume) one training run; returns the exit status (0 done, 130 interrupted).
 
-
-def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
-    return build_parser().parse_args(argv)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    parser.add_argument("--task", choices=["reach", "grasp"], default="reach")
-    parser.add_argument("--algo", choices=["ppo", "sac", "td3", "tqc"], default="ppo")
-    parser.add_argument("--hyperparams", default=None,
-                        help="hyperparameter YAML (default: config/<algo>_<task>.yaml)")
-    parser.add_argument("--n-envs", type=int, default=None,
-                        help="parallel environments (default: the config's, else one per core)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--timesteps", type=int, default=None, help="default: the config's n_timesteps")
-    parser.add_argument("--run-dir", type=Path, default=None, help="default: runs/<task>_<algo>_<time>")
-    parser.add_argument("--resume", action="store_true", help="continue --run-dir from its last checkpoint")
-    parser.add_argument("--checkpoint-freq", type=int, default=20_000, help="steps between checkpoints")
-    parser.add_argument("--eval-freq", type=int, default=20_000, help="steps between evaluations")
-    parser.add_argument("--eval-episodes", type=int, default=40)
-    parser.add_argument("--target-success", type=float, default=0.95,
-                        help="evaluation success rate that counts as solved (time to solve)")
-    parser.add_argument("--stop-at-success", action="store_true", help="stop once solved")
-    parser.add_argument("--no-subprocess", action="store_true", help="DummyVecEnv instead of SubprocVecEnv")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.add_argument("--torch-threads", type=int, default=1)
-    return parser
-
-
-def main(argv: Optional[List[str]] = None) -> int:
-    t_start = time.time()
-    args = parse_args(argv if argv is not None else [a for a in sys.argv[1:] if not a.startswith("__")])
-    try:
-        return train(args, t_start)
-    except ConfigError as error:
-        print(f"train.py: configuration error: {error}", file=sys.stderr)
-        return 2
-
-
-def train(args: argparse.Namespace, t_start: float) -> int:
+    :param args: the command line's options (see :mod:`fr5_rl.cli.train`).
+    :param t_start: wall-clock start (s since the epoch), for wall time and time to solve.
+    :param defaults: every option's default, so a resumed run keeps its own settings unless an
+        option is given again.
+    :raises ConfigError: a configuration problem, before any training time is spent.
+    """
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -267,17 +209,18 @@ def train(args: argparse.Namespace, t_start: float) -> int:
         for key in ("task", "algo", "seed", "n_envs", "hyperparams_resolved", "timesteps"):
             setattr(args, key, saved[key])
         for key in ("checkpoint_freq", "eval_freq", "eval_episodes", "no_subprocess", "target_success"):
-            if key in saved and getattr(args, key) == parser_defaults()[key]:
+            if key in saved and getattr(args, key) == defaults[key]:
                 setattr(args, key, saved[key])  # keep the run's settings unless given again
-        hyper = args.hyperparams_resolved
+        source = str(args.run_dir / "config.json")
+        hyper = typed(Hyperparameters, args.hyperparams_resolved, f"{source}: hyperparams_resolved")
     else:
+        source = str(hyperparameter_source(args.algo, args.task, args.hyperparams))
         hyper = load_hyperparameters(args.algo, args.task, args.hyperparams)
-        args.n_envs = args.n_envs or int(hyper.get("n_envs", os.cpu_count() or 1))
-        args.timesteps = int(args.timesteps or hyper["n_timesteps"])
+        args.n_envs = args.n_envs or hyper.n_envs
+        args.timesteps = int(args.timesteps or hyper.n_timesteps)
         if args.run_dir is None:
             args.run_dir = Path("runs") / f"{args.task}_{args.algo}_{time.strftime('%Y%m%d-%H%M%S')}"
-    check_hyperparameters(args.algo, hyper, args.n_envs)
-    for warning in hyper.pop("_warnings", []):
+    for warning in check_hyperparameters(args.algo, hyper, args.n_envs, source):
         print(f"train.py: warning: {warning}", file=sys.stderr)
     run_dir: Path = args.run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -285,13 +228,11 @@ def train(args: argparse.Namespace, t_start: float) -> int:
 
     from ..envs import FR5Env  # after argument checks: imports pybullet
 
-    env_overrides = hyper["env"]
+    env_overrides = hyper.env
     probe = FR5Env(task=args.task, config=env_overrides)
-    meta = {"task": args.task, "algo": args.algo, "env_overrides": env_overrides,
-            "env_config": probe.cfg, "robot_config": load_yaml("robot"),
-            "observation_size": int(probe.observation_space.shape[0]),
-            "action_size": int(probe.action_space.shape[0]), "control_dt": probe.control_dt,
-            "seed": args.seed, "n_envs": args.n_envs}
+    meta = build_meta(args.task, args.algo, env_overrides, probe.cfg, load_yaml("robot"),
+                      probe.observation_space.shape[0], probe.action_space.shape[0], probe.control_dt,
+                      args.seed, n_envs=args.n_envs, trained_by="rl")
     probe.close()
 
     venv = make_vec_env(args.task, env_overrides, args.n_envs, args.seed, run_dir / "monitor",
@@ -304,7 +245,12 @@ def train(args: argparse.Namespace, t_start: float) -> int:
     elapsed_before = float(summary.get("wall_time_s", 0.0))
 
     if args.resume and recover_model_dir(latest):
-        venv = VecNormalize.load(str(latest / STATS_FILE), venv)
+        check_sb3_zip(latest / MODEL_FILE)
+        try:
+            venv = VecNormalize.load(str(latest / STATS_FILE), venv)
+        except Exception as error:
+            venv.close()
+            raise damaged(latest / STATS_FILE, error, "VecNormalize statistics") from None
         model = algo_cls.load(latest / MODEL_FILE, env=venv, device="cpu")
         if (latest / REPLAY_FILE).is_file():
             model.load_replay_buffer(latest / REPLAY_FILE)
@@ -312,17 +258,16 @@ def train(args: argparse.Namespace, t_start: float) -> int:
     else:
         if args.resume:
             print(f"train.py: {run_dir} has no checkpoint yet; starting it from scratch")
-        norm = hyper["normalize"]
-        venv = VecNormalize(venv, norm_obs=bool(norm.get("norm_obs", True)),
-                            norm_reward=bool(norm.get("norm_reward", False)),
-                            clip_obs=float(norm.get("clip_obs", 10.0)), gamma=float(hyper["algo_kwargs"].get("gamma", 0.99)))
-        kwargs = dict(hyper["algo_kwargs"])
+        norm = hyper.normalize
+        venv = VecNormalize(venv, norm_obs=norm.norm_obs, norm_reward=norm.norm_reward, clip_obs=norm.clip_obs,
+                            gamma=float(hyper.algo_kwargs.get("gamma", 0.99)))
+        kwargs = dict(hyper.algo_kwargs)
         policy = kwargs.pop("policy", "MlpPolicy")
         model = algo_cls(policy, venv, seed=args.seed, device="cpu", tensorboard_log=str(run_dir / "tb"),
                          verbose=0, **kwargs)
         write_json_atomic(run_dir / "config.json", {
             "task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
-            "timesteps": args.timesteps, "hyperparams_resolved": hyper,
+            "timesteps": args.timesteps, "hyperparams_resolved": hyper.to_dict(),
             "checkpoint_freq": args.checkpoint_freq, "eval_freq": args.eval_freq,
             "eval_episodes": args.eval_episodes, "no_subprocess": args.no_subprocess,
             "target_success": args.target_success})

@@ -1,4 +1,4 @@
-"""``rosrun fr5_rl export_onnx.py MODEL_DIR``: write MODEL_DIR/model.onnx.
+"""Exporting a model directory's actor to ONNX: what ``rosrun fr5_rl export_onnx.py`` runs.
 
 The graph takes the *raw* observation (batch, obs_size) and returns the deterministic action
 (batch, 7) in [-1, 1]: the VecNormalize statistics are folded in, so onnxruntime needs nothing
@@ -6,15 +6,13 @@ else. ``--check N`` compares it with SB3 ``predict`` on N observations from real
 """
 from __future__ import annotations
 
-import argparse
-import sys
 import warnings
 from pathlib import Path
-from typing import List, Optional
+from typing import List
 
 import numpy as np
 
-from .artifacts import ONNX_FILE, ModelFilesError, read_meta
+from ..runtime.bundle import ONNX_FILE, check_files_present, read_meta
 
 
 def build_actor_module(model, normalizer):
@@ -53,9 +51,11 @@ def export(model_dir: Path) -> Path:
     """Export MODEL_DIR's actor to MODEL_DIR/model.onnx; returns the path."""
     import torch
 
-    from ..policy import TorchPolicy
+    from ..runtime.policy import TorchPolicy, check_meta_matches_code
 
+    check_files_present(model_dir, "torch")
     meta = read_meta(model_dir)
+    check_meta_matches_code(model_dir, meta)
     torch_policy = TorchPolicy(model_dir, meta)
     module = build_actor_module(torch_policy.model, torch_policy.normalizer)
     example = torch.zeros(1, int(meta["observation_size"]), dtype=torch.float32)
@@ -90,30 +90,10 @@ def rollout_observations(task: str, env_overrides, policy, count: int, seed: int
 
 def parity(model_dir: Path, count: int = 1000) -> float:
     """max |action_onnx - action_sb3| over ``count`` rollout observations."""
-    from ..policy import load_policy
+    from ..runtime.policy import load_policy
 
     torch_policy = load_policy(model_dir, "torch")
     onnx_policy = load_policy(model_dir, "onnx")
     observations = rollout_observations(torch_policy.task, torch_policy.meta.get("env_overrides", {}),
                                         torch_policy, count)
     return float(max(np.max(np.abs(torch_policy.act(o) - onnx_policy.act(o))) for o in observations))
-
-
-def main(argv: Optional[List[str]] = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("model_dir", type=Path)
-    parser.add_argument("--check", type=int, default=1000, help="parity check on N rollout observations (0: skip)")
-    args = parser.parse_args(argv if argv is not None else [a for a in sys.argv[1:] if not a.startswith("__")])
-    try:
-        path = export(args.model_dir)
-    except ModelFilesError as error:
-        print(f"export_onnx.py: {error}", file=sys.stderr)
-        return 2
-    print(f"wrote {path}")
-    if args.check:
-        worst = parity(args.model_dir, args.check)
-        print(f"parity over {args.check} rollout observations: max |delta action| = {worst:.2e}")
-        if worst > 1e-5:
-            print("export_onnx.py: ONNX and SB3 disagree beyond 1e-5", file=sys.stderr)
-            return 1
-    return 0

@@ -1,25 +1,20 @@
-"""``rosrun fr5_rl evaluate.py MODEL_DIR``: success rate of a trained policy on held-out seeds.
+"""Evaluating policies on held-out seeds, and drawing learning curves: what evaluate.py runs.
 
-Writes ``episodes.csv`` (one row per episode) and a JSON summary (success rate with its 95 %
-Wilson interval, mean episode length, collision rate, the seeds). ``--gif`` records one
-rollout headless; ``--plot RUN_DIR`` draws the learning curve of a training run. Use
-``--expert`` instead of a model directory to measure the scripted expert, and ``--config`` /
-``--randomise`` to evaluate under noise, latency, mass and friction changes.
+Per-episode records (seed, success, failure cause, length, return, final distance), their
+summary (success rate with its 95 % Wilson interval, mean length, failure causes), and the
+learning curve of a training run.
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import math
-import sys
-import time
 from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from .artifacts import EVAL_FILE, ModelFilesError, write_json_atomic
+from ..runtime.bundle import write_json_atomic
 
 HELD_OUT_SEED_START = 1_000_000  # far from every training (0..) and evaluation-callback seed
 
@@ -137,81 +132,11 @@ def plot_learning_curve(run_dir: Path, out: Path) -> Path:
     return out
 
 
-def main(argv: Optional[List[str]] = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("model_dir", type=Path, nargs="?", help="model directory (model.zip + vecnormalize.pkl + meta.json)")
-    parser.add_argument("--expert", choices=["reach", "grasp"], help="evaluate the scripted expert on this task")
-    parser.add_argument("--backend", choices=["torch", "onnx"], default="torch")
-    parser.add_argument("--episodes", type=int, default=200)
-    parser.add_argument("--seed-start", type=int, default=HELD_OUT_SEED_START)
-    parser.add_argument("--config", type=str, default=None,
-                        help="JSON env overrides merged over the model's, e.g. '{\"randomisation\": {\"enabled\": true}}'")
-    parser.add_argument("--training-env", action="store_true",
-                        help="evaluate with the model's training overrides (e.g. its randomisation)")
-    parser.add_argument("--out", type=Path, default=None, help="summary JSON (default: MODEL_DIR/eval.json)")
-    parser.add_argument("--csv", type=Path, default=None, help="per-episode CSV (default: beside the summary)")
-    parser.add_argument("--gif", type=Path, default=None, help="record the first episode as a GIF")
-    parser.add_argument("--plot", type=Path, default=None, metavar="RUN_DIR", help="draw RUN_DIR's learning curve")
-    parser.add_argument("--plot-out", type=Path, default=None)
-    args = parser.parse_args(argv if argv is not None else [a for a in sys.argv[1:] if not a.startswith("__")])
-
-    if args.plot:
-        out = plot_learning_curve(args.plot, args.plot_out or args.plot / "learning_curve.png")
-        print(f"wrote {out}")
-        if args.model_dir is None and args.expert is None:
-            return 0
-    overrides: Dict[str, Any] = {}
-    t0 = time.time()
-    if args.expert:
-        from ..expert import ScriptedExpert
-
-        task, label = args.expert, "scripted expert"
-
-        def make_actor(env):
-            expert = ScriptedExpert(env)
-            return expert.act, expert.reset
-    else:
-        if args.model_dir is None:
-            parser.error("give a MODEL_DIR, --expert TASK or --plot RUN_DIR")
-        from ..policy import load_policy
-
-        try:
-            policy = load_policy(args.model_dir, args.backend)
-        except ModelFilesError as error:
-            print(f"evaluate.py: {error}", file=sys.stderr)
-            return 2
-        task, label = policy.task, str(args.model_dir)
-        # The task as registered, not the training variant (which may randomise); use
-        # --training-env for that.
-        overrides = dict(policy.meta.get("env_overrides", {})) if args.training_env else {}
-
-        def make_actor(env):
-            return policy.act, None
-    if args.config:
-        from ..config import deep_update, load_yaml
-
-        overrides = deep_update(deep_update(load_yaml("env"), overrides), json.loads(args.config))
-    seeds = list(range(args.seed_start, args.seed_start + args.episodes))
-    records = run_episodes(task, overrides, make_actor, seeds, gif_path=args.gif)
-    summary = summarise(records)
-    summary.update({"policy": label, "task": task, "backend": args.backend if not args.expert else "expert",
-                    "deterministic": True, "seeds": [seeds[0], seeds[-1]], "env_overrides": overrides,
-                    "eval_wall_time_s": round(time.time() - t0, 1)})
-    if not args.expert:
-        meta = policy.meta
-        summary.update({"algo": meta["algo"], "training_steps": meta.get("num_timesteps"),
-                        "training_wall_time_s": meta.get("training_wall_time_s"), "machine": meta.get("machine")})
-    out = args.out or (args.model_dir / EVAL_FILE if args.model_dir else Path(f"eval_{task}_expert.json"))
+def write_results(summary: Dict[str, Any], records: List[Dict[str, Any]], out: Path, csv_path: Path) -> None:
+    """The summary as JSON at ``out`` and one CSV row per episode at ``csv_path``."""
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out, summary)
-    csv_path = args.csv or out.with_suffix(".csv")
     with open(csv_path, "w", newline="", encoding="utf-8") as stream:
         writer = csv.DictWriter(stream, fieldnames=list(records[0].keys()))
         writer.writeheader()
         writer.writerows(records)
-    low, high = summary["success_rate_95ci"]
-    print(f"{label} on {task}: success {summary['successes']}/{summary['episodes']} = "
-          f"{summary['success_rate']:.1%} (95% CI {low:.1%}-{high:.1%}), mean length "
-          f"{summary['mean_episode_length']:.1f}, collisions {summary['collision_rate']:.1%}")
-    print(f"wrote {out} and {csv_path}")
-    return 0

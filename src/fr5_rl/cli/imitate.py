@@ -1,0 +1,40 @@
+"""``rosrun fr5_rl imitate.py``: learn a policy from the scripted expert with DAgger.
+
+The result is an ordinary model directory that evaluate.py, export_onnx.py and the policy
+node take like any trained model. Defaults come from config/dagger_<task>.yaml.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import List, Optional
+
+from ..config import ConfigError
+from ..runtime.bundle import ModelFilesError
+from . import fail, script_args
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="imitate.py", description=__doc__.split("\n\n")[0].strip("`"),
+                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser.add_argument("--task", choices=["reach", "grasp"], default="grasp")
+    parser.add_argument("--hyperparams", default=None,
+                        help="DAgger YAML (default: config/dagger_<task>.yaml)")
+    parser.add_argument("--run-dir", type=Path, default=None, help="default: runs/<task>_dagger_<time>")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--rounds", type=int, default=None, help="DAgger rounds after the expert round (default: the file's)")
+    parser.add_argument("--episodes", type=int, default=None, help="episodes per round (default: the file's)")
+    parser.add_argument("--epochs", type=int, default=None, help="fitting epochs per round (default: the file's)")
+    parser.add_argument("--eval-episodes", type=int, default=50, help="evaluation episodes per round (50)")
+    parser.add_argument("--torch-threads", type=int, default=1, help="(1)")
+    return parser
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    args = build_parser().parse_args(script_args(argv))
+    from ..training.imitation import run_dagger
+
+    try:
+        return run_dagger(args)
+    except (ConfigError, ModelFilesError) as error:
+        return fail("imitate.py", error)

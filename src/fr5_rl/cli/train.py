@@ -1,0 +1,55 @@
+"""``rosrun fr5_rl train.py``: train an FR5 policy with Stable-Baselines3.
+
+Examples::
+
+    rosrun fr5_rl train.py --task reach                   # PPO, config/ppo_reach.yaml
+    rosrun fr5_rl train.py --task grasp --algo tqc --n-envs 2 --timesteps 300000
+    rosrun fr5_rl train.py --resume --run-dir runs/reach_ppo_20261122-1300
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+from typing import List, Optional
+
+from ..config import ConfigError
+from ..runtime.bundle import ModelFilesError
+from . import fail, script_args
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="train.py", description=__doc__.split("\n\n")[0].strip("`"),
+                                     epilog=__doc__.split("\n\n", 1)[1],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--task", choices=["reach", "grasp"], default="reach")
+    parser.add_argument("--algo", choices=["ppo", "sac", "td3", "tqc"], default="ppo")
+    parser.add_argument("--hyperparams", default=None,
+                        help="hyperparameter YAML (default: config/<algo>_<task>.yaml)")
+    parser.add_argument("--n-envs", type=int, default=None, help="parallel environments (default: the config's)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--timesteps", type=int, default=None, help="default: the config's n_timesteps")
+    parser.add_argument("--run-dir", type=Path, default=None, help="default: runs/<task>_<algo>_<time>")
+    parser.add_argument("--resume", action="store_true", help="continue --run-dir from its last checkpoint")
+    parser.add_argument("--checkpoint-freq", type=int, default=20_000, help="steps between checkpoints (20000)")
+    parser.add_argument("--eval-freq", type=int, default=20_000, help="steps between evaluations (20000)")
+    parser.add_argument("--eval-episodes", type=int, default=40, help="episodes per evaluation (40)")
+    parser.add_argument("--target-success", type=float, default=0.95,
+                        help="evaluation success rate that counts as solved, for time to solve (0.95)")
+    parser.add_argument("--stop-at-success", action="store_true", help="stop once solved")
+    parser.add_argument("--no-subprocess", action="store_true", help="DummyVecEnv instead of SubprocVecEnv")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--torch-threads", type=int, default=1, help="(1)")
+    return parser
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    t_start = time.time()
+    parser = build_parser()
+    args = parser.parse_args(script_args(argv))
+    from ..training.train import train  # after parsing: --help stays fast
+
+    try:
+        return train(args, t_start, vars(parser.parse_args([])))
+    except (ConfigError, ModelFilesError) as error:
+        return fail("train.py", error)

@@ -1,0 +1,215 @@
+"""The 50 Hz deployment step and its safety gate, free of ROS.
+
+Every control period the policy node hands :class:`DeploymentStep` the newest inputs (joint
+state, target position in ``base_link``, the clock) and gets back either a :class:`Command`
+that passed the :class:`SafetyGate`, or a :class:`Hold` whose :class:`HoldReason` says why
+nothing should be sent. On a hold the node publishes nothing, so the controller keeps its last
+target. The step builds the observation and shapes the action with the same code the
+environments use (:class:`~fr5_rl.observation.ObservationBuilder`,
+:class:`~fr5_rl.control.JointCommandShaper`), so what runs on the robot is what was trained.
+"""
+from __future__ import annotations
+
+import enum
+import math
+import time
+from dataclasses import dataclass
+from typing import Any, Mapping, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from ..config import RobotSpec, object_rest_z
+from ..control import JointCommandShaper
+from ..kinematics import ForwardKinematics
+from ..observation import ObservationBuilder, ObservationInputs
+from .joint_state import ArmJointState, Reading
+from .policy import Policy
+
+
+class HoldReason(enum.Enum):
+    """Why a control period sends no command."""
+
+    DISABLED = "disabled"
+    NO_JOINT_STATE = "no joint state received yet"
+    JOINT_STATE_INVALID = "joint state unusable"
+    JOINT_STATE_STALE = "joint state stale"
+    NO_TARGET = "no target received yet"
+    TARGET_UNAVAILABLE = "target not transformable"
+    TARGET_STALE = "target stale"
+    TARGET_INVALID = "target invalid"
+    OBSERVATION_INVALID = "observation invalid"
+    UNSAFE_COMMAND = "command failed the safety gate"
+
+
+@dataclass(frozen=True)
+class Hold:
+    """Send nothing this period.
+
+    :param reason: the kind of problem (compare these, not the text).
+    :param detail: a human-readable explanation with the numbers.
+    """
+
+    reason: HoldReason
+    detail: str
+
+    def __str__(self) -> str:
+        return f"{self.reason.value}: {self.detail}"
+
+
+@dataclass(frozen=True)
+class Command:
+    """A checked command for one control period.
+
+    :param arm_positions: joint position targets (rad), controller order ``j1`` … ``j6``.
+    :param gripper_width: commanded opening width (m), 0 … max opening.
+    :param target_in_base: the target position (m, ``base_link``) the policy acted on.
+    :param inference_s: time the policy took (s).
+    """
+
+    arm_positions: Tuple[float, ...]
+    gripper_width: float
+    target_in_base: Tuple[float, float, float]
+    inference_s: float
+
+
+@dataclass(frozen=True)
+class StepInputs:
+    """The newest inputs at one control period.
+
+    :param now: current time (s) on the same monotonic clock as the readings' ``received``.
+    :param joint_state: newest joint-state reading, None if none arrived yet.
+    :param target: newest target reading (position in ``base_link``, m), None if none yet.
+    """
+
+    now: float
+    joint_state: Optional[Reading[ArmJointState]]
+    target: Optional[Reading[Sequence[float]]]
+
+
+class SafetyGate:
+    """The last check before a command leaves: nothing that fails it is ever sent.
+
+    A command passes when it has exactly one finite value per joint, lies inside the FR5
+    joint limits, and is within one control period's velocity limit of the measured position.
+
+    :param robot: the robot's limits.
+    :param control_dt: control period (s).
+    """
+
+    def __init__(self, robot: RobotSpec, control_dt: float) -> None:
+        self.lower = robot.lower_limits
+        self.upper = robot.upper_limits
+        self.step_limit = robot.velocity_limits * control_dt + 1e-9
+
+    def check(self, targets: Sequence[float], measured: Sequence[float]) -> Optional[str]:
+        """None when ``targets`` (rad) are safe to send from ``measured`` (rad), else what fails."""
+        targets, measured = np.asarray(targets, dtype=np.float64), np.asarray(measured, dtype=np.float64)
+        if targets.shape != self.lower.shape:
+            return f"{targets.size} joint targets, the arm has {self.lower.size}"
+        if not np.isfinite(targets).all():
+            return "joint targets contain NaN or inf"
+        outside = np.flatnonzero((targets < self.lower) | (targets > self.upper))
+        if outside.size:
+            return f"joint j{outside[0] + 1} target {targets[outside[0]]:.3f} rad is outside its limits"
+        steps = np.abs(targets - measured)
+        too_fast = np.flatnonzero(steps > self.step_limit)
+        if too_fast.size:
+            joint = too_fast[0]
+            return (f"joint j{joint + 1} would move {steps[joint]:.3f} rad in one period "
+                    f"(limit {self.step_limit[joint]:.3f} rad)")
+        return None
+
+
+class DeploymentStep:
+    """One control period of a trained policy on the robot: inputs in, command or hold out.
+
+    :param policy: the loaded policy.
+    :param robot: the robot's numbers (limits, kinematics).
+    :param env_cfg: the environment configuration the policy was trained with.
+    :param joint_state_timeout: older joint states (s) hold the arm.
+    :param target_timeout: older targets (s) hold the arm.
+    :param new_target_jump: a target that moves further than this (m) between two periods is a
+        new object: the action filter restarts, as at the start of an episode.
+    """
+
+    def __init__(self, policy: Policy, robot: RobotSpec, env_cfg: Mapping[str, Any], joint_state_timeout: float,
+                 target_timeout: float, new_target_jump: float = 0.05) -> None:
+        self.policy = policy
+        self.control_dt = float(env_cfg["simulation"]["control_dt"])
+        self.kinematics = ForwardKinematics(robot)
+        self.builder = ObservationBuilder(robot, env_cfg["observation"], policy.task == "grasp")
+        if self.builder.size != policy.observation_size:
+            raise ValueError(f"the policy takes {policy.observation_size} observation values; this fr5_rl "
+                             f"builds {self.builder.size} for {policy.task}")
+        self.shaper = JointCommandShaper(robot, env_cfg["action"], self.control_dt)
+        self.gate = SafetyGate(robot, self.control_dt)
+        self.object_rest_z = object_rest_z(env_cfg)
+        self.joint_state_timeout = float(joint_state_timeout)
+        self.target_timeout = float(target_timeout)
+        self.new_target_jump = float(new_target_jump)
+        self.enabled = True
+        # The commanded width is part of the next observation whether or not it is sent, as in
+        # training; the gripper starts open, as every episode does.
+        self.gripper_command_width = robot.max_opening_width
+        self.last_hold: Optional[Hold] = Hold(HoldReason.NO_JOINT_STATE, "starting")
+        self._last_target: Optional[np.ndarray] = None
+
+    def __call__(self, inputs: StepInputs) -> Union[Command, Hold]:
+        """The command for this period, or why to hold."""
+        result = self._step(inputs)
+        self.last_hold = result if isinstance(result, Hold) else None
+        return result
+
+    def _step(self, inputs: StepInputs) -> Union[Command, Hold]:
+        if not self.enabled:
+            return Hold(HoldReason.DISABLED, "paused through ~enable")
+        joints = inputs.joint_state
+        if joints is None:
+            return Hold(HoldReason.NO_JOINT_STATE, "waiting for the first joint state")
+        if joints.problem is not None:
+            return Hold(HoldReason.JOINT_STATE_INVALID, joints.problem)
+        age = inputs.now - joints.received
+        if age > self.joint_state_timeout:
+            return Hold(HoldReason.JOINT_STATE_STALE,
+                        f"{age * 1000:.0f} ms old > {self.joint_state_timeout * 1000:.0f} ms")
+        target = inputs.target
+        if target is None:
+            return Hold(HoldReason.NO_TARGET, "waiting for the first target pose")
+        if target.problem is not None:
+            return Hold(HoldReason.TARGET_UNAVAILABLE, target.problem)
+        age = inputs.now - target.received
+        if age > self.target_timeout:
+            return Hold(HoldReason.TARGET_STALE, f"{age:.2f} s old > {self.target_timeout:g} s")
+        target_in_base = np.asarray(target.value, dtype=np.float64).reshape(-1)
+        if target_in_base.shape != (3,) or not np.isfinite(target_in_base).all():
+            return Hold(HoldReason.TARGET_INVALID, f"target position must be 3 finite values, got {target.value}")
+
+        state = joints.value
+        tcp_position, tcp_rotation = self.kinematics.tcp_pose(state.positions)
+        width = state.gripper_width if state.gripper_width is not None else self.gripper_command_width
+        try:
+            observation = self.builder.build(ObservationInputs(
+                joint_positions=state.positions, joint_velocities=state.velocities, gripper_width=width,
+                gripper_command_width=self.gripper_command_width, tcp_position=tcp_position,
+                tcp_approach_axis=tcp_rotation[:, 2], object_position=target_in_base,
+                object_lift=float(target_in_base[2] - self.object_rest_z)))
+        except ValueError as error:
+            return Hold(HoldReason.OBSERVATION_INVALID, str(error))
+
+        # Resuming after a hold, or a new object: start like an episode starts, without the
+        # action filter's old momentum.
+        new_object = (self._last_target is not None
+                      and math.dist(target_in_base, self._last_target) > self.new_target_jump)
+        if self.last_hold is not None or new_object:
+            self.shaper.reset()
+        self._last_target = target_in_base
+        started = time.perf_counter()
+        action = self.policy.act(observation)
+        inference = time.perf_counter() - started
+        targets = self.shaper.arm_targets(action, state.positions)
+        problem = self.gate.check(targets, state.positions)
+        if problem is not None:
+            return Hold(HoldReason.UNSAFE_COMMAND, problem)
+        self.gripper_command_width = self.shaper.gripper_width(action)
+        return Command(tuple(targets.tolist()), self.gripper_command_width,
+                       tuple(target_in_base.tolist()), inference)
