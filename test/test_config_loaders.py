@@ -1,0 +1,78 @@
+"""One typed loader per kind of configuration file: unknown keys, missing keys and wrong types
+are refused with the key's path; defaults live in the YAML files only."""
+from pathlib import Path
+
+import pytest
+import yaml
+
+from fr5_rl.config import (ConfigError, DaggerConfig, Hyperparameters, PolicyNodeParams, SimNodeParams,
+                           StaticTransforms, load_typed, load_yaml, typed)
+from fr5_rl.training.algorithms import check_hyperparameters, load_hyperparameters
+from fr5_rl.transforms import load_static_transforms
+
+ROOT = Path(__file__).resolve().parent.parent
+KINDS = [(PolicyNodeParams, "policy_node"), (SimNodeParams, "sim_node"), (StaticTransforms, "static_transforms"),
+         (Hyperparameters, "ppo_reach"), (Hyperparameters, "tqc_grasp"), (DaggerConfig, "dagger_grasp")]
+
+
+@pytest.mark.parametrize("cls, name", KINDS, ids=[k[1] for k in KINDS])
+def test_shipped_files_load(cls, name):
+    assert isinstance(load_typed(cls, name), cls)
+
+
+def write(tmp_path: Path, data) -> Path:
+    path = tmp_path / "file.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def mutated(name: str, change):
+    data = load_yaml(name)
+    change(data)
+    return data
+
+
+@pytest.mark.parametrize("cls, name, change, words", [
+    (PolicyNodeParams, "policy_node", lambda d: d.update(modle_dir="x"), "unknown key 'modle_dir'"),
+    (PolicyNodeParams, "policy_node", lambda d: d.update(rate="fast"), "'rate' must be a number"),
+    (PolicyNodeParams, "policy_node", lambda d: d.update(command_gripper="yes"), "'command_gripper' must be true or false"),
+    (PolicyNodeParams, "policy_node", lambda d: d.update(backend="tensorrt"), "'backend' must be torch or onnx"),
+    (PolicyNodeParams, "policy_node", lambda d: d.pop("target_timeout"), "missing key 'target_timeout'"),
+    (SimNodeParams, "sim_node", lambda d: d.update(seed=1.5), "'seed' must be an integer"),
+    (SimNodeParams, "sim_node", lambda d: d.update(task="stack"), "'task' must be reach or grasp"),
+    (StaticTransforms, "static_transforms", lambda d: d["transforms"][0].update(xyz=[0, 0]), "transforms[0]"),
+    (StaticTransforms, "static_transforms", lambda d: d["transforms"][1].update(parnet="x"), "unknown key 'transforms[1].parnet'"),
+    (StaticTransforms, "static_transforms", lambda d: d["transforms"][0].update(rpy=[0, "a", 0]), "'transforms[0].rpy[1]' must be a number"),
+    (Hyperparameters, "ppo_reach", lambda d: d["normalize"].update(norm_obs="on"), "'normalize.norm_obs' must be true or false"),
+    (Hyperparameters, "ppo_reach", lambda d: d.update(n_timestep=5), "unknown key 'n_timestep'"),
+    (Hyperparameters, "ppo_reach", lambda d: d["env"].update(randomization={}), "'env'"),
+    (Hyperparameters, "ppo_reach", lambda d: d.pop("n_envs"), "missing key 'n_envs'"),
+    (DaggerConfig, "dagger_grasp", lambda d: d["dagger"].pop("rounds"), "missing key 'dagger.rounds'"),
+    (DaggerConfig, "dagger_grasp", lambda d: d["dagger"].update(rounds="many"), "'dagger.rounds' must be an integer"),
+    (DaggerConfig, "dagger_grasp", lambda d: d["dagger"].update(expert_share_decay=2.0), "expert_share_decay"),
+], ids=lambda v: v if isinstance(v, str) and " " in v else "")
+def test_bad_files_are_refused_with_the_key_path(tmp_path, cls, name, change, words):
+    path = write(tmp_path, mutated(name, change))
+    with pytest.raises(ConfigError) as caught:
+        load_typed(cls, path)
+    assert words in str(caught.value) and str(path) in str(caught.value), str(caught.value)
+
+
+def test_algo_kwargs_names_are_checked_against_the_algorithm(tmp_path):
+    hyper = load_hyperparameters("ppo", "reach", write(tmp_path, mutated("ppo_reach", lambda d: d["algo_kwargs"].update(n_step=512))))
+    with pytest.raises(ConfigError, match="unknown key 'algo_kwargs.n_step' for PPO"):
+        check_hyperparameters("ppo", hyper, hyper.n_envs)
+    hyper = load_hyperparameters("ppo", "reach", write(tmp_path, mutated("ppo_reach", lambda d: d["algo_kwargs"].update(seed=3))))
+    with pytest.raises(ConfigError, match="set by train.py"):
+        check_hyperparameters("ppo", hyper, hyper.n_envs)
+
+
+def test_hyperparameters_round_trip_through_a_run_config():
+    hyper = load_hyperparameters("ppo", "reach")
+    assert typed(Hyperparameters, hyper.to_dict(), "config.json") == hyper
+
+
+def test_static_transforms_loader_gives_matrices():
+    entries = load_static_transforms()
+    camera = next(e for e in entries if e["child"] == "camera_link")
+    assert camera["matrix"].shape == (4, 4) and camera["matrix"][2, 3] == pytest.approx(camera["xyz"][2])

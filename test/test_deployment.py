@@ -1,0 +1,151 @@
+"""The 50 Hz deployment step without ROS: each hold reason, the safety gate, and commands that
+respect the FR5's joint and velocity limits."""
+import math
+
+import numpy as np
+import pytest
+
+from fr5_rl.config import load_env_config, load_robot_spec
+from fr5_rl.runtime.deployment import Command, DeploymentStep, Hold, HoldReason, SafetyGate, StepInputs
+from fr5_rl.runtime.joint_state import ArmJointState, JointStateReader, Reading
+from fr5_rl.runtime.policy import Policy
+
+ROBOT = load_robot_spec()
+ENV_CFG = load_env_config()
+DT = float(ENV_CFG["simulation"]["control_dt"])
+NOW = 100.0
+TARGET = (-0.5, 0.1, 0.03)  # m, base_link: on the table in front of the arm
+
+
+class FixedPolicy(Policy):
+    """A policy that always returns the same action (the step's logic is what is under test)."""
+
+    backend = "fixed"
+
+    def __init__(self, action, task="reach"):
+        super().__init__({"task": task, "algo": "ppo", "observation_size": 23 if task == "reach" else 24,
+                          "action_size": 7})
+        self.action = np.asarray(action, dtype=np.float64)
+        self.seen = []
+
+    def _act(self, observation):
+        self.seen.append(observation)
+        return self.action
+
+
+def make_step(action=(1, -1, 0.5, 0, 0, 0, 1), **kwargs) -> DeploymentStep:
+    return DeploymentStep(FixedPolicy(action), ROBOT, ENV_CFG, joint_state_timeout=0.1, target_timeout=0.5, **kwargs)
+
+
+def joint_reading(positions=None, received=NOW, velocities=None, width=0.08) -> Reading:
+    positions = ROBOT.home_joint_positions if positions is None else np.asarray(positions, dtype=float)
+    velocities = np.zeros(6) if velocities is None else np.asarray(velocities, dtype=float)
+    return Reading(ArmJointState(positions, velocities, width), received)
+
+
+def inputs(joints="good", target="good", now=NOW) -> StepInputs:
+    joints = joint_reading() if joints == "good" else joints
+    target = Reading(TARGET, NOW) if target == "good" else target
+    return StepInputs(now, joints, target)
+
+
+def test_good_inputs_give_a_command_within_limits():
+    step = make_step()
+    result = step(inputs())
+    assert isinstance(result, Command), result
+    targets = np.array(result.arm_positions)
+    assert targets.shape == (6,) and np.isfinite(targets).all()
+    assert np.all(np.abs(targets - ROBOT.home_joint_positions) <= ROBOT.velocity_limits * DT + 1e-12)
+    assert result.gripper_width == pytest.approx(ROBOT.max_opening_width)  # action +1 = open
+    assert result.target_in_base == TARGET and step.last_hold is None
+
+
+@pytest.mark.parametrize("case, expected", [
+    (lambda s: setattr(s, "enabled", False) or inputs(), HoldReason.DISABLED),
+    (lambda s: inputs(joints=None), HoldReason.NO_JOINT_STATE),
+    (lambda s: inputs(joints=JointStateReader(ROBOT.joint_names, ()).read(["j1", "j2"], [0, 0], [], 0.0, NOW)),
+     HoldReason.JOINT_STATE_INVALID),
+    (lambda s: inputs(joints=joint_reading(received=NOW - 0.15)), HoldReason.JOINT_STATE_STALE),
+    (lambda s: inputs(target=None), HoldReason.NO_TARGET),
+    (lambda s: inputs(target=Reading(None, NOW, "no transform camera_link -> base_link")), HoldReason.TARGET_UNAVAILABLE),
+    (lambda s: inputs(target=Reading(TARGET, NOW - 0.6)), HoldReason.TARGET_STALE),
+    (lambda s: inputs(target=Reading((math.nan, 0.0, 0.0), NOW)), HoldReason.TARGET_INVALID),
+    (lambda s: inputs(target=Reading((0.0, 0.0), NOW)), HoldReason.TARGET_INVALID),
+    (lambda s: inputs(joints=joint_reading(velocities=[0, 0, math.inf, 0, 0, 0])), HoldReason.OBSERVATION_INVALID),
+    # Measured beyond j1's upper limit (3.0543 rad): the clamped target is a jump back.
+    (lambda s: inputs(joints=joint_reading(positions=[3.2, -1.57, 1.57, -1.57, -1.57, 0.0])), HoldReason.UNSAFE_COMMAND),
+], ids=lambda v: v.name if isinstance(v, HoldReason) else "")
+def test_each_hold_reason(case, expected):
+    step = make_step()
+    result = step(case(step))
+    assert isinstance(result, Hold) and result.reason is expected, result
+    assert result.detail and step.last_hold == result
+    assert not step.policy.seen or expected is HoldReason.UNSAFE_COMMAND  # no inference on bad inputs
+
+
+def test_a_hold_sends_no_stale_gripper_width():
+    """The width a held period computed never becomes the next observation's commanded width."""
+    step = make_step(action=(0, 0, 0, 0, 0, 0, -1))
+    step(inputs(joints=joint_reading(positions=[3.2, -1.57, 1.57, -1.57, -1.57, 0.0])))
+    assert step.gripper_command_width == pytest.approx(ROBOT.max_opening_width)
+
+
+def test_resuming_after_a_hold_restarts_the_action_filter():
+    fresh = make_step()(inputs())
+    step = make_step()
+    step(inputs())
+    second = step(inputs())  # the filter carries momentum: a bigger step than the first
+    assert not np.allclose(second.arm_positions, fresh.arm_positions)
+    assert isinstance(step(inputs(target=None)), Hold)
+    resumed = step(inputs())
+    assert np.allclose(resumed.arm_positions, fresh.arm_positions)
+
+
+def test_a_new_object_restarts_the_action_filter():
+    fresh = make_step()(inputs(target=Reading((-0.4, -0.2, 0.03), NOW)))
+    step = make_step()
+    step(inputs())
+    moved = step(inputs(target=Reading((-0.4, -0.2, 0.03), NOW)))  # 0.32 m away: a new object
+    assert np.allclose(moved.arm_positions, fresh.arm_positions)
+
+
+def test_observation_matches_the_environment_builder():
+    """The step feeds the policy the observation the environments build from the same state."""
+    from fr5_rl.kinematics import ForwardKinematics
+    from fr5_rl.observation import ObservationBuilder
+
+    step = make_step()
+    step(inputs())
+    position, rotation = ForwardKinematics(ROBOT).tcp_pose(ROBOT.home_joint_positions)
+    expected = ObservationBuilder(ROBOT, ENV_CFG["observation"], False).build_from(
+        ROBOT.home_joint_positions, np.zeros(6), 0.08, ROBOT.max_opening_width, position, rotation[:, 2], TARGET)
+    np.testing.assert_allclose(step.policy.seen[0], expected, atol=1e-7)
+
+
+def test_wrong_policy_size_is_refused():
+    assert DeploymentStep(FixedPolicy([0] * 7, task="grasp"), ROBOT, ENV_CFG, 0.1, 0.5).builder.size == 24
+    policy = FixedPolicy([0] * 7)
+    policy.observation_size = 24
+    with pytest.raises(ValueError, match="observation values"):
+        DeploymentStep(policy, ROBOT, ENV_CFG, 0.1, 0.5)
+
+
+# ----------------------------------------------------------------------------- the safety gate
+GATE = SafetyGate(ROBOT, DT)
+HOME = ROBOT.home_joint_positions
+
+
+@pytest.mark.parametrize("targets, words", [
+    (HOME[:5], "5 joint targets"),
+    (np.r_[HOME[:5], math.nan], "NaN"),
+    (np.r_[ROBOT.upper_limits[0] + 0.01, HOME[1:]], "j1 target"),
+    (HOME + np.r_[0, 0, 0.07, 0, 0, 0], "j3 would move 0.070 rad"),
+], ids=["length", "nan", "limit", "velocity"])
+def test_gate_refuses(targets, words):
+    problem = GATE.check(targets, HOME)
+    assert problem is not None and words in problem, problem
+
+
+def test_gate_passes_a_step_at_the_velocity_limit():
+    assert GATE.check(HOME + ROBOT.velocity_limits * DT * 0.999, HOME) is None
+    assert GATE.check(HOME + ROBOT.velocity_limits * DT * 1.01, HOME) is not None
