@@ -181,8 +181,10 @@ class DeploymentStep:
         if age > self.target_timeout:
             return Hold(HoldReason.TARGET_STALE, f"{age:.2f} s old > {self.target_timeout:g} s")
         target_in_base = np.asarray(target.value, dtype=np.float64).reshape(-1)
-        if target_in_base.shape != (3,) or not np.isfinite(target_in_base).all():
-            return Hold(HoldReason.TARGET_INVALID, f"target position must be 3 finite values, got {target.value}")
+        if target_in_base.shape != (3,):
+            return Hold(HoldReason.TARGET_INVALID, f"target position needs 3 values, got {target.value}")
+        if not np.isfinite(target_in_base).all():
+            return Hold(HoldReason.TARGET_INVALID, f"target position contains NaN or inf: {target.value}")
 
         state = joints.value
         tcp_position, tcp_rotation = self.kinematics.tcp_pose(state.positions)
