@@ -11,18 +11,16 @@ import argparse
 import json
 import sys
 import time
-from collections import defaultdict
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, Optional
 
-import numpy as np
 
 from ..config import ConfigError, Hyperparameters, load_yaml, typed
 from ..runtime.bundle import (MODEL_FILE, STATS_FILE, algorithm_class, build_meta, check_sb3_zip, damaged,
                               machine_description, recover_model_dir, save_model_dir, write_json_atomic)
 from .algorithms import check_hyperparameters, hyperparameter_source, load_hyperparameters
+from .callbacks import REPLAY_FILE, save_checkpoint
 
-REPLAY_FILE = "replay_buffer.pkl"
 EVAL_SEED_OFFSET = 10_000  # evaluation seeds never overlap training seeds
 
 
@@ -66,107 +64,21 @@ def make_vec_env(task: str, env_overrides: Dict[str, Any], n_envs: int, seed: in
     return DummyVecEnv(factories)
 
 
-def build_callbacks(args, run_dir: Path, eval_env, meta: Dict[str, Any], t_start: float,
+def build_callbacks(args: argparse.Namespace, run_dir: Path, eval_env, meta: Dict[str, Any], t_start: float,
                     summary: Dict[str, Any]):
     """Checkpointing, evaluation (best model with stats), reward-term logging, time-to-solve."""
-    from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
+    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
 
-    class AtomicCheckpoint(BaseCallback):
-        """Every ``freq`` steps: model + stats (+ replay buffer) replace checkpoints/latest."""
-
-        def __init__(self, freq: int) -> None:
-            super().__init__()
-            self.freq = max(int(freq), 1)
-            self._next = None
-
-        def _on_training_start(self) -> None:
-            self._next = (self.num_timesteps // self.freq + 1) * self.freq
-
-        def _on_step(self) -> bool:
-            if self.num_timesteps >= self._next:
-                save_checkpoint(self.model, run_dir, meta)
-                self._next += self.freq
-            return True
-
-    class RewardTermLogger(BaseCallback):
-        """Per-episode sums of every reward part and failure causes, into TensorBoard."""
-
-        def __init__(self) -> None:
-            super().__init__()
-            self._running: List[Dict[str, float]] = []
-            self._finished: Dict[str, List[float]] = defaultdict(list)
-            self._failures: Dict[str, int] = defaultdict(int)
-            self._episodes = 0
-
-        def _on_step(self) -> bool:
-            infos, dones = self.locals["infos"], self.locals["dones"]
-            if not self._running:
-                self._running = [defaultdict(float) for _ in infos]
-            for index, (info, done) in enumerate(zip(infos, dones)):
-                for key, value in info.items():
-                    if key.startswith("reward_"):
-                        self._running[index][key] += float(value)
-                if done:
-                    for key, value in self._running[index].items():
-                        self._finished[key].append(value)
-                    self._running[index] = defaultdict(float)
-                    self._episodes += 1
-                    failure = info.get("failure")
-                    if failure:
-                        self._failures[failure] += 1
-            return True
-
-        def _on_rollout_end(self) -> None:
-            for key, values in self._finished.items():
-                self.logger.record(f"reward_terms/{key[len('reward_'):]}", float(np.mean(values)))
-            if self._episodes:
-                for cause, count in self._failures.items():
-                    self.logger.record(f"failures/{cause}", count / self._episodes)
-            self._finished.clear()
-            self._failures.clear()
-            self._episodes = 0
-
-    class SaveBest(BaseCallback):
-        def _on_step(self) -> bool:
-            save_model_dir(run_dir / "best", self.model, self.model.get_vec_normalize_env(),
-                           {**meta, "num_timesteps": int(self.model.num_timesteps)})
-            return True
-
-    class SolveTimer(BaseCallback):
-        """Records when the evaluation success rate first reaches the target; may stop there."""
-
-        def _on_step(self) -> bool:
-            evaluator = self.parent
-            rate = float(np.mean(evaluator._is_success_buffer)) if evaluator._is_success_buffer else 0.0
-            summary.setdefault("eval_history", []).append(
-                {"timesteps": int(self.num_timesteps), "wall_s": round(time.time() - t_start, 1),
-                 "success_rate": rate})
-            if rate >= args.target_success and "time_to_solve_s" not in summary:
-                summary["time_to_solve_s"] = round(time.time() - t_start, 1)
-                summary["timesteps_to_solve"] = int(self.num_timesteps)
-                save_model_dir(run_dir / "solved", self.model, self.model.get_vec_normalize_env(),
-                               {**meta, "num_timesteps": int(self.num_timesteps)})
-            write_json_atomic(run_dir / "summary.json", summary)
-            return not (args.stop_at_success and "time_to_solve_s" in summary)
+    from .callbacks import AtomicCheckpoint, RewardTermLogger, SaveBest, SolveTimer
 
     eval_every = max(args.eval_freq // args.n_envs, 1)
     evaluation = EvalCallback(
         eval_env, n_eval_episodes=args.eval_episodes, eval_freq=eval_every, deterministic=True,
-        log_path=str(run_dir / "eval"), best_model_save_path=None, callback_on_new_best=SaveBest(),
-        callback_after_eval=SolveTimer(), verbose=0,
+        log_path=str(run_dir / "eval"), best_model_save_path=None, callback_on_new_best=SaveBest(run_dir / "best", meta),
+        callback_after_eval=SolveTimer(run_dir, meta, summary, t_start, args.target_success, args.stop_at_success),
+        verbose=0,
     )
-    return CallbackList([AtomicCheckpoint(args.checkpoint_freq), RewardTermLogger(), evaluation])
-
-
-def save_checkpoint(model, run_dir: Path, meta: Dict[str, Any]) -> None:
-    """Model + normalisation stats (+ replay buffer for off-policy) as checkpoints/latest."""
-
-    def write_replay_buffer(staging: Path) -> None:
-        if getattr(model, "replay_buffer", None) is not None:
-            model.save_replay_buffer(staging / REPLAY_FILE)
-
-    save_model_dir(run_dir / "checkpoints" / "latest", model, model.get_vec_normalize_env(),
-                   {**meta, "num_timesteps": int(model.num_timesteps)}, write_extra=write_replay_buffer)
+    return CallbackList([AtomicCheckpoint(run_dir, meta, args.checkpoint_freq), RewardTermLogger(), evaluation])
 
 
 def close_vec_env(venv, interrupted: bool) -> None:

@@ -1,0 +1,131 @@
+"""Stable-Baselines3 callbacks of a training run: checkpoints, reward terms, best model, time to solve."""
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any, Dict, List
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+
+from ..runtime.bundle import save_model_dir, write_json_atomic
+
+REPLAY_FILE = "replay_buffer.pkl"
+
+
+def save_checkpoint(model, run_dir: Path, meta: Dict[str, Any]) -> None:
+    """Model + normalisation stats (+ replay buffer for off-policy) as ``run_dir/checkpoints/latest``."""
+
+    def write_replay_buffer(staging: Path) -> None:
+        if getattr(model, "replay_buffer", None) is not None:
+            model.save_replay_buffer(staging / REPLAY_FILE)
+
+    save_model_dir(run_dir / "checkpoints" / "latest", model, model.get_vec_normalize_env(),
+                   {**meta, "num_timesteps": int(model.num_timesteps)}, write_extra=write_replay_buffer)
+
+
+class AtomicCheckpoint(BaseCallback):
+    """Every ``freq`` steps, model + stats (+ replay buffer) replace ``checkpoints/latest`` at once.
+
+    :param run_dir: the run directory.
+    :param meta: the model's ``meta.json`` (``num_timesteps`` is added).
+    :param freq: environment steps between checkpoints.
+    """
+
+    def __init__(self, run_dir: Path, meta: Dict[str, Any], freq: int) -> None:
+        super().__init__()
+        self.run_dir, self.meta = run_dir, meta
+        self.freq = max(int(freq), 1)
+        self._next = self.freq
+
+    def _on_training_start(self) -> None:
+        self._next = (self.num_timesteps // self.freq + 1) * self.freq
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps >= self._next:
+            save_checkpoint(self.model, self.run_dir, self.meta)
+            self._next += self.freq
+        return True
+
+
+class RewardTermLogger(BaseCallback):
+    """Per-episode sums of every reward part (``info['reward_*']``) and failure causes, into TensorBoard."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._running: List[Dict[str, float]] = []
+        self._finished: Dict[str, List[float]] = defaultdict(list)
+        self._failures: Dict[str, int] = defaultdict(int)
+        self._episodes = 0
+
+    def _on_step(self) -> bool:
+        infos, dones = self.locals["infos"], self.locals["dones"]
+        if not self._running:
+            self._running = [defaultdict(float) for _ in infos]
+        for index, (info, done) in enumerate(zip(infos, dones)):
+            for key, value in info.items():
+                if key.startswith("reward_"):
+                    self._running[index][key] += float(value)
+            if done:
+                for key, value in self._running[index].items():
+                    self._finished[key].append(value)
+                self._running[index] = defaultdict(float)
+                self._episodes += 1
+                failure = info.get("failure")
+                if failure:
+                    self._failures[failure] += 1
+        return True
+
+    def _on_rollout_end(self) -> None:
+        for key, values in self._finished.items():
+            self.logger.record(f"reward_terms/{key[len('reward_'):]}", float(np.mean(values)))
+        if self._episodes:
+            for cause, count in self._failures.items():
+                self.logger.record(f"failures/{cause}", count / self._episodes)
+        self._finished.clear()
+        self._failures.clear()
+        self._episodes = 0
+
+
+class SaveBest(BaseCallback):
+    """On a new best evaluation: the model *with its statistics* into ``directory``."""
+
+    def __init__(self, directory: Path, meta: Dict[str, Any]) -> None:
+        super().__init__()
+        self.directory, self.meta = directory, meta
+
+    def _on_step(self) -> bool:
+        save_model_dir(self.directory, self.model, self.model.get_vec_normalize_env(),
+                       {**self.meta, "num_timesteps": int(self.model.num_timesteps)})
+        return True
+
+
+class SolveTimer(BaseCallback):
+    """After each evaluation: records the success history, and when the success rate first
+    reaches ``target`` (time to solve, with the model saved as ``solved/``); may stop there.
+
+    :param t_start: wall-clock start of the run (s since the epoch), earlier sessions included.
+    :param target: evaluation success rate that counts as solved (0..1).
+    :param stop_at_success: end training once solved.
+    """
+
+    def __init__(self, run_dir: Path, meta: Dict[str, Any], summary: Dict[str, Any], t_start: float,
+                 target: float, stop_at_success: bool) -> None:
+        super().__init__()
+        self.run_dir, self.meta, self.summary = run_dir, meta, summary
+        self.t_start, self.target, self.stop_at_success = t_start, target, stop_at_success
+
+    def _on_step(self) -> bool:
+        evaluator, summary = self.parent, self.summary
+        rate = float(np.mean(evaluator._is_success_buffer)) if evaluator._is_success_buffer else 0.0
+        wall = round(time.time() - self.t_start, 1)
+        summary.setdefault("eval_history", []).append(
+            {"timesteps": int(self.num_timesteps), "wall_s": wall, "success_rate": rate})
+        if rate >= self.target and "time_to_solve_s" not in summary:
+            summary["time_to_solve_s"] = wall
+            summary["timesteps_to_solve"] = int(self.num_timesteps)
+            save_model_dir(self.run_dir / "solved", self.model, self.model.get_vec_normalize_env(),
+                           {**self.meta, "num_timesteps": int(self.num_timesteps)})
+        write_json_atomic(self.run_dir / "summary.json", summary)
+        return not (self.stop_at_success and "time_to_solve_s" in summary)
