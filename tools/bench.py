@@ -22,18 +22,18 @@ steps are not), median of the repeats:
   object pose, contacts), their results unused.
 
 Inference latency of a model directory (default models/reach; skipped when absent): p50/p99
-of single-observation ``Policy.act`` calls through ``fr5_rl.policy.load_policy`` for the torch
+of single-observation ``Policy.act`` calls through ``fr5_rl.runtime.policy.load_policy`` for the torch
 and onnx backends (the onnx graph is exported into a temporary copy when the directory has
 none). Observations come from rollouts in the model's own environment.
 
-Targets are printed as PASS/FAIL, never asserted. Results go to bench/results/env_speed.json,
-bench/results/inference.json and bench/results/summary.json (every JSON in bench/results
-merged). Only time.perf_counter is used for timing.
+Targets are printed as met / not met, never asserted. Results go to
+bench/results/env_speed.json and bench/results/inference.json (each with its "verdicts"), and
+this bench's entries of bench/results/summary.json are replaced (the other benches' are kept;
+see tools/benchlib.py). Only time.perf_counter is used for timing.
 """
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shutil
 import statistics
@@ -45,13 +45,9 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parent.parent
-if str(REPO / "src") not in sys.path:
-    sys.path.insert(0, str(REPO / "src"))
+from benchlib import (AT_LEAST, AT_MOST, REPO, RESULTS_DIR, latency_ms, machine_info, pass_fail, relative_path,
+                      update_summary, verdict, write_result)
 
-from fr5_rl.training.train import machine_description  # noqa: E402
-
-RESULTS = REPO / "bench" / "results"
 TARGETS = {
     "FR5Reach-v0": {"real_time_factor": 100.0},
     "FR5Grasp-v0": {"real_time_factor": 50.0},
@@ -60,24 +56,23 @@ TARGETS = {
 }
 
 
-# ----------------------------------------------------------------------------- machine
-def machine_info() -> Dict[str, Any]:
-    info: Dict[str, Any] = dict(machine_description())
-    info["cores_usable"] = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    if hasattr(os, "getloadavg"):
-        info["load_average_1min_at_start"] = round(os.getloadavg()[0], 2)
-    for module in ("numpy", "pybullet", "torch", "onnxruntime", "stable_baselines3"):
-        try:
-            from importlib.metadata import version
-
-            info[module] = version(module)
-        except Exception:  # pragma: no cover - informational only
-            pass
-    return info
+def env_verdicts(environments: Dict[str, Dict[str, Any]]) -> Dict[str, Dict[str, Any]]:
+    """Per environment: real-time factor at least its target, overhead at most 1.3x."""
+    verdicts = {}
+    for env_id, r in sorted(environments.items()):
+        verdicts[f"{env_id}.real_time_factor"] = verdict(
+            r["real_time_factor"], TARGETS[env_id]["real_time_factor"], AT_LEAST, "x", f"{env_id} real-time factor")
+        verdicts[f"{env_id}.overhead"] = verdict(
+            r["overhead"], TARGETS["overhead_max"], AT_MOST, "x", f"{env_id} env time / bare PyBullet")
+    return verdicts
 
 
-def verdict(ok: bool) -> str:
-    return "PASS" if ok else "FAIL"
+def inference_verdicts(result: Dict[str, Any]) -> Dict[str, Dict[str, Any]]:
+    """onnx p99 at most 0.2 ms; none when the bench was skipped."""
+    if result.get("skipped"):
+        return {}
+    return {"onnx_p99_ms": verdict(result["backends"]["onnx"]["p99_ms"], TARGETS["onnx_p99_ms_max"], AT_MOST, "ms",
+                                   f"{result.get('task')} policy inference (onnx) p99")}
 
 
 # ----------------------------------------------------------------------------- env speed
@@ -181,7 +176,6 @@ def resting_step_seconds(env, steps: int, seed: int) -> float:
 
 
 def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0) -> Dict[str, Any]:
-    import fr5_rl  # noqa: F401  (registers the environments)
     from fr5_rl.envs import FR5Env
 
     task = {"FR5Reach-v0": "reach", "FR5Grasp-v0": "grasp"}[env_id]
@@ -246,6 +240,7 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0)
 
     rtf = median("real_time_factor")
     overhead = median("overhead")
+    met = env_verdicts({env_id: {"real_time_factor": rtf, "overhead": overhead}})
     return {
         "env_id": env_id,
         "steps_per_repeat": steps,
@@ -267,9 +262,9 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0)
         "per_repeat": per_repeat,
         "targets": {
             "real_time_factor_min": TARGETS[env_id]["real_time_factor"],
-            "real_time_factor": verdict(rtf >= TARGETS[env_id]["real_time_factor"]),
+            "real_time_factor": pass_fail(met[f"{env_id}.real_time_factor"]),
             "overhead_max": TARGETS["overhead_max"],
-            "overhead": verdict(overhead <= TARGETS["overhead_max"]),
+            "overhead": pass_fail(met[f"{env_id}.overhead"]),
         },
     }
 
@@ -303,32 +298,22 @@ def time_calls(act, observations: np.ndarray, calls: int, warmup: int = 200) -> 
         t0 = perf()
         act(obs)
         samples[i] = perf() - t0
-    ms = samples * 1e3
-    return {"calls": calls, "p50_ms": float(np.percentile(ms, 50)), "p90_ms": float(np.percentile(ms, 90)),
-            "p99_ms": float(np.percentile(ms, 99)), "mean_ms": float(ms.mean()), "max_ms": float(ms.max())}
-
-
-def display_path(path: Path) -> str:
-    """A path relative to the repository when inside it: results carry no machine paths."""
-    try:
-        return str(Path(path).resolve().relative_to(REPO))
-    except ValueError:
-        return str(path)
+    return {"calls": calls, **latency_ms(samples, points=(50, 90, 99), mean=True)}
 
 
 def bench_inference(model_dir: Optional[Path], calls: int) -> Dict[str, Any]:
     if model_dir is None or not model_dir.is_dir():
         return {"skipped": True, "reason": f"no model directory at {model_dir}"}
-    from fr5_rl.policy import load_policy
-    from fr5_rl.training.artifacts import ONNX_FILE, ModelFilesError
+    from fr5_rl.runtime.bundle import ONNX_FILE, ModelFilesError
+    from fr5_rl.runtime.policy import load_policy
 
-    result: Dict[str, Any] = {"model_dir": display_path(model_dir), "backends": {}}
+    result: Dict[str, Any] = {"model_dir": relative_path(model_dir), "backends": {}}
     work = model_dir
     tmp = None
     try:
         torch_policy = load_policy(model_dir, "torch")
     except ModelFilesError as error:
-        return {"skipped": True, "reason": str(error), "model_dir": display_path(model_dir)}
+        return {"skipped": True, "reason": str(error), "model_dir": relative_path(model_dir)}
     observations = rollout_observations(torch_policy.task, torch_policy.meta.get("env_overrides", {}),
                                         min(calls, 2000))
     result.update({"task": torch_policy.task, "algo": torch_policy.meta.get("algo"),
@@ -336,7 +321,7 @@ def bench_inference(model_dir: Optional[Path], calls: int) -> Dict[str, Any]:
     result["backends"]["torch"] = time_calls(torch_policy.act, observations, calls)
     try:
         if not (model_dir / ONNX_FILE).is_file():
-            from fr5_rl.training.export_onnx import export
+            from fr5_rl.training.onnx_export import export
 
             tmp = Path(tempfile.mkdtemp(prefix="fr5_bench_"))
             work = tmp / model_dir.name
@@ -350,57 +335,23 @@ def bench_inference(model_dir: Optional[Path], calls: int) -> Dict[str, Any]:
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
-    p99 = result["backends"]["onnx"]["p99_ms"]
     result["targets"] = {"onnx_p99_ms_max": TARGETS["onnx_p99_ms_max"],
-                         "onnx_p99": verdict(p99 <= TARGETS["onnx_p99_ms_max"])}
+                         "onnx_p99": pass_fail(inference_verdicts(result)["onnx_p99_ms"])}
     return result
 
 
 # ----------------------------------------------------------------------------- output
-def write_json(path: Path, data: Dict[str, Any]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
-    tmp.replace(path)
-
-
-def write_summary(results_dir: Path) -> Path:
-    merged: Dict[str, Any] = {}
-    for path in sorted(results_dir.glob("*.json")):
-        if path.name == "summary.json":
-            continue
-        try:
-            merged[path.stem] = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as error:
-            merged[path.stem] = {"unreadable": str(error)}
-    verdicts = {}
-    for name, data in merged.items():
-        stack = [(name, data)]
-        while stack:  # collect every PASS/FAIL, wherever it sits
-            prefix, node = stack.pop()
-            if isinstance(node, dict):
-                stack.extend((f"{prefix}.{k}", v) for k, v in node.items())
-            elif isinstance(node, list):
-                stack.extend((f"{prefix}[{i}]", v) for i, v in enumerate(node))
-            elif node in ("PASS", "FAIL"):
-                verdicts[prefix] = node
-    summary = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "verdicts": dict(sorted(verdicts.items())),
-               "results": merged}
-    path = results_dir / "summary.json"
-    write_json(path, summary)
-    return path
-
-
 def print_env_table(rows: List[Dict[str, Any]]) -> None:
     header = (f"{'environment':<13} {'steps/s':>9} {'x real time':>12} {'target':>7}  "
               f"{'env step':>9} {'bare replay':>12} {'overhead':>9} {'target':>7}")
     print(header)
     print("-" * len(header))
+    verdicts = env_verdicts({r["env_id"]: r for r in rows})
     for r in rows:
-        t = r["targets"]
+        rtf, overhead = (verdicts[f"{r['env_id']}.{key}"]["verdict"] for key in ("real_time_factor", "overhead"))
         print(f"{r['env_id']:<13} {r['steps_per_s']:>9.0f} {r['real_time_factor']:>11.1f}x "
-              f"{t['real_time_factor']:>7}  {r['env_step_us']:>7.0f}us {r['bare_replay_step_us']:>10.0f}us "
-              f"{r['overhead']:>8.2f}x {t['overhead']:>7}")
+              f"{rtf:>7}  {r['env_step_us']:>7.0f}us {r['bare_replay_step_us']:>10.0f}us "
+              f"{r['overhead']:>8.2f}x {overhead:>7}")
     for r in rows:
         print(f"{r['env_id']}: of {r['env_step_us']:.0f}us per env step (resets included), "
               f"{r['physics_in_env_step_us']:.0f}us are physics ({r['substeps']} substeps) and "
@@ -424,7 +375,7 @@ def print_inference_table(result: Dict[str, Any]) -> None:
     print(header)
     print("-" * len(header))
     for backend, s in result["backends"].items():
-        target = result["targets"]["onnx_p99"] if backend == "onnx" else ""
+        target = inference_verdicts(result)["onnx_p99_ms"]["verdict"] if backend == "onnx" else ""
         print(f"{backend:<8} {s['p50_ms']:>7.3f}ms {s['p90_ms']:>7.3f}ms {s['p99_ms']:>7.3f}ms "
               f"{s['mean_ms']:>7.3f}ms {s['max_ms']:>7.3f}ms  {target}")
     print(f"target: onnx p99 <= {TARGETS['onnx_p99_ms_max']} ms; max |action torch - onnx| = "
@@ -441,11 +392,13 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--model", type=Path, default=None, help="model directory (default models/reach)")
     parser.add_argument("--skip-env", action="store_true")
     parser.add_argument("--skip-inference", action="store_true")
-    parser.add_argument("--results", type=Path, default=RESULTS, help="output directory")
+    parser.add_argument("--results", type=Path, default=RESULTS_DIR,
+                        help="output directory (default bench/results); its summary.json is updated")
     args = parser.parse_args(argv)
     steps = args.steps or (1000 if args.quick else 5000)
     calls = args.calls or (1000 if args.quick else 5000)
 
+    written: List[Path] = []
     machine = machine_info()
     print(f"machine: {machine['cpu']}, {machine['cores']} cores ({machine['cores_usable']} usable), "
           f"load {machine.get('load_average_1min_at_start', '?')}; python {machine['python']}, "
@@ -454,26 +407,28 @@ def main(argv: Optional[List[str]] = None) -> int:
         rows = [bench_env(env_id, steps, args.repeats, args.warmup) for env_id in ("FR5Reach-v0", "FR5Grasp-v0")]
         print()
         print_env_table(rows)
-        env_result = {"quick": args.quick, "machine": machine, "environments": {r["env_id"]: r for r in rows}}
+        environments = {r["env_id"]: r for r in rows}
+        env_result = {"quick": args.quick, "machine": machine, "environments": environments}
         if hasattr(os, "getloadavg"):
             env_result["machine"] = dict(machine, load_average_1min_at_end=round(os.getloadavg()[0], 2))
-        write_json(args.results / "env_speed.json", env_result)
+        written.append(write_result(args.results / "env_speed.json", env_result, env_verdicts(environments)))
     if not args.skip_inference:
         model_dir = args.model or (REPO / "models" / "reach")
         if args.model is None and not model_dir.is_dir():
-            print(f"\ninference latency: skipped, {model_dir} does not exist "
+            print(f"\ninference latency: skipped, {relative_path(model_dir)} does not exist "
                   "(train one or pass --model DIR)")
-            result: Dict[str, Any] = {"skipped": True, "reason": f"{model_dir} does not exist"}
+            result: Dict[str, Any] = {"skipped": True, "reason": f"{relative_path(model_dir)} does not exist"}
         else:
             result = bench_inference(model_dir, calls)
             print()
             print_inference_table(result)
         result.update({"quick": args.quick, "machine": machine})
-        write_json(args.results / "inference.json", result)
-    summary = write_summary(args.results)
-    written = [str(args.results / name) for name, skipped in (("env_speed.json", args.skip_env),
-                                                              ("inference.json", args.skip_inference)) if not skipped]
-    print(f"\nwrote {', '.join(written + [str(summary)])}")
+        written.append(write_result(args.results / "inference.json", result, inference_verdicts(result)))
+    for path in list(written):
+        summary = update_summary(args.results, path.stem, path)
+    if written:
+        written.append(summary)
+    print(f"\nwrote {', '.join(os.path.relpath(path) for path in written)}")
     return 0
 
 

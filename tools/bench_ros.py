@@ -6,11 +6,11 @@ Starts ``sim_policy.launch`` headless on its own ROS master, records the policy 
 per-cycle timing (``/fr5_policy/timing``: loop period, inference, compute latency from reading
 the inputs to publishing, age of the joint state used), and compares the closed-loop success
 rate through ROS with the gym evaluation of the same model on the same placements (seeds).
-Writes bench/results/ros_loop_<task>.json. Targets: latency p99 <= 3 ms, period jitter p99 <= 2 ms,
-parity within 5 points.
+Writes bench/results/ros_loop_<task>.json and updates that bench's entries in
+bench/results/summary.json. Targets: latency p99 <= 3 ms, period jitter p99 <= 2 ms, parity
+within 5 points.
 """
 import argparse
-import json
 import os
 import re
 import signal
@@ -18,31 +18,45 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parent.parent
-RESULTS = REPO / "bench" / "results"
+from benchlib import AT_MOST, REPO, RESULTS_DIR, latency_ms, relative_path, update_summary, verdict, write_result
+
+TARGETS = {"compute_latency_p99_ms": 3.0, "period_jitter_p99_ms": 2.0, "parity_points": 5.0}
 
 
-def percentiles(values_s):
-    values = np.asarray(values_s, dtype=float) * 1000.0
-    values = values[np.isfinite(values)]
-    if values.size == 0:
-        return {"p50_ms": None, "p99_ms": None, "max_ms": None, "samples": 0}
-    return {"p50_ms": round(float(np.percentile(values, 50)), 4), "p99_ms": round(float(np.percentile(values, 99)), 4),
-            "max_ms": round(float(values.max()), 4), "samples": int(values.size)}
+def ros_verdicts(result: Dict[str, Any]) -> Dict[str, Dict[str, Any]]:
+    """Compute latency p99 <= 3 ms, period jitter p99 <= 2 ms, ROS-vs-gym gap <= 5 points; a
+    timing never recorded is not met."""
+    task = result.get("task")
+    return {
+        "compute_latency_p99_ms": verdict((result.get("compute_latency") or {}).get("p99_ms"),
+                                          TARGETS["compute_latency_p99_ms"], AT_MOST, "ms",
+                                          f"{task} policy node compute latency p99"),
+        "period_jitter_p99_ms": verdict((result.get("period_jitter") or {}).get("p99_ms"),
+                                        TARGETS["period_jitter_p99_ms"], AT_MOST, "ms",
+                                        f"{task} policy node loop period jitter p99"),
+        "parity_gap_points": verdict(result.get("parity_gap_points"), TARGETS["parity_points"], AT_MOST,
+                                     "points", f"{task} success gap ROS vs gym"),
+    }
 
 
-def main() -> int:
+def main(argv: Optional[List[str]] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--model", default="models/reach")
+    parser.add_argument("--model", default="models/reach", help="model directory, relative to the repository")
     parser.add_argument("--episodes", type=int, default=20)
     parser.add_argument("--backend", choices=["torch", "onnx"], default="onnx")
     parser.add_argument("--seed", type=int, default=700000)
     parser.add_argument("--port", type=int, default=11411)
-    args = parser.parse_args()
-    meta = json.loads((REPO / args.model / "meta.json").read_text())
+    parser.add_argument("--results", type=Path, default=RESULTS_DIR,
+                        help="output directory (default bench/results); its summary.json is updated")
+    args = parser.parse_args(argv)
+    from fr5_rl.runtime.bundle import read_meta
+
+    model_dir = REPO / args.model
+    meta = read_meta(model_dir)
     task = meta["task"]
     env = dict(os.environ, ROS_MASTER_URI=f"http://localhost:{args.port}")
     os.environ["ROS_MASTER_URI"] = env["ROS_MASTER_URI"]
@@ -79,35 +93,41 @@ def main() -> int:
     timing = np.array(samples[5:]) if len(samples) > 5 else np.zeros((0, 4))  # skip start-up cycles
     control_dt = float(meta.get("control_dt", 0.02))
 
-    from fr5_rl.training.evaluate import run_episodes
-    from fr5_rl.policy import load_policy
+    from fr5_rl.runtime.policy import load_policy
+    from fr5_rl.training.evaluation import run_episodes
 
-    policy = load_policy(REPO / args.model, args.backend)
+    policy = load_policy(model_dir, args.backend)
     records = run_episodes(task, {}, lambda env: (policy.act, None), list(range(args.seed, args.seed + args.episodes)))
     gym_rate = sum(r["success"] for r in records) / len(records)
     ros_rate = successes / episodes if episodes else 0.0
+
+    def timing_ms(seconds) -> Optional[Dict[str, Any]]:
+        return latency_ms(seconds, digits=4) if len(timing) else None
+
     result = {
-        "model": args.model, "task": task, "backend": args.backend, "episodes": episodes, "seeds": [args.seed, args.seed + args.episodes - 1],
+        "model": relative_path(model_dir), "task": task, "backend": args.backend, "episodes": episodes,
+        "seeds": [args.seed, args.seed + args.episodes - 1],
         "ros_success_rate": ros_rate, "gym_success_rate_same_seeds": gym_rate,
         "parity_gap_points": round(100 * abs(ros_rate - gym_rate), 1),
-        "loop_period": percentiles(timing[:, 0]) if len(timing) else None,
-        "period_jitter": percentiles(np.abs(timing[:, 0] - control_dt)) if len(timing) else None,
-        "inference": percentiles(timing[:, 1]) if len(timing) else None,
-        "compute_latency": percentiles(timing[:, 2]) if len(timing) else None,
-        "joint_state_age_at_command": percentiles(timing[:, 3]) if len(timing) else None,
-        "targets": {"compute_latency_p99_ms": 3.0, "period_jitter_p99_ms": 2.0, "parity_points": 5.0},
+        "loop_period": timing_ms(timing[:, 0]),
+        "period_jitter": timing_ms(np.abs(timing[:, 0] - control_dt)),
+        "inference": timing_ms(timing[:, 1]),
+        "compute_latency": timing_ms(timing[:, 2]),
+        "joint_state_age_at_command": timing_ms(timing[:, 3]),
+        "targets": dict(TARGETS),
     }
-    ok = lambda cond: "PASS" if cond else "FAIL"  # noqa: E731
+    verdicts = ros_verdicts(result)
     if len(timing):
         print(f"policy node ({args.backend}), {len(timing)} cycles:")
         for key in ("loop_period", "period_jitter", "inference", "compute_latency", "joint_state_age_at_command"):
             print(f"  {key:28s} p50 {result[key]['p50_ms']:.3f} ms  p99 {result[key]['p99_ms']:.3f} ms")
-        print(f"  latency p99 <= 3 ms: {ok(result['compute_latency']['p99_ms'] <= 3.0)};"
-              f" jitter p99 <= 2 ms: {ok(result['period_jitter']['p99_ms'] <= 2.0)}")
     print(f"closed loop through ROS: {successes}/{episodes}; gym on the same seeds: {gym_rate:.0%}; "
-          f"gap {result['parity_gap_points']} points ({ok(result['parity_gap_points'] <= 5.0)})")
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / f"ros_loop_{task}.json").write_text(json.dumps(result, indent=2) + "\n")
+          f"gap {result['parity_gap_points']} points")
+    for v in verdicts.values():
+        print(f"  {v['text']}")
+    path = write_result(args.results / f"ros_loop_{task}.json", result, verdicts)
+    summary = update_summary(args.results, path.stem, path)
+    print(f"wrote {os.path.relpath(path)}, {os.path.relpath(summary)}")
     return 0
 
 

@@ -82,17 +82,34 @@ def summarise(records: List[Dict[str, Any]]) -> Dict[str, Any]:
             "failures": failures}
 
 
+def format_count(value: float, _position: Any = None) -> str:
+    """A step or sample count as a short axis label: 0 -> "0", 500 -> "500", 200000 -> "200k",
+    1200000 -> "1.2M" (three significant digits). Usable as a matplotlib FuncFormatter."""
+    if value == 0:
+        return "0"
+    for divisor, suffix in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
+        shown = f"{value / divisor:.3g}"
+        if abs(float(shown)) >= 1:
+            return f"{shown}{suffix}"
+    return f"{value:.3g}"
+
+
 def plot_learning_curve(run_dir: Path, out: Path) -> Path:
     """PNG of a run's evaluation success against training experience.
 
     RL runs (train.py): success and mean return of the evaluation callback against steps.
     DAgger runs (imitate.py): the learner's evaluation success after each round against the
-    number of expert-labelled samples.
+    number of expert-labelled samples. Counts on the x axis read 200k, 1.2M (:func:`format_count`).
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, MaxNLocator
+
+    def count_axis(axis) -> None:
+        axis.xaxis.set_major_locator(MaxNLocator(nbins=6, steps=[1, 2, 2.5, 5, 10], integer=True, min_n_ticks=3))
+        axis.xaxis.set_major_formatter(FuncFormatter(format_count))
 
     summary_path = run_dir / "summary.json"
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
@@ -110,6 +127,7 @@ def plot_learning_curve(run_dir: Path, out: Path) -> Path:
                         textcoords="offset points", xytext=(0, -14), ha="center", fontsize=7)
         ax.set(xlabel="expert-labelled samples (DAgger rounds)", ylabel="evaluation success (%)", ylim=(-2, 105))
         ax.grid(alpha=0.3)
+        count_axis(ax)
         fig.suptitle(f"{summary.get('task')} / DAgger from the scripted expert, {machine.get('cores')} cores")
     else:
         data = np.load(run_dir / "eval" / "evaluations.npz")
@@ -122,9 +140,12 @@ def plot_learning_curve(run_dir: Path, out: Path) -> Path:
         ax[1].plot(steps, data["results"].mean(axis=1))
         ax[1].set(xlabel="environment steps", ylabel="mean evaluation return", title="return")
         ax[1].grid(alpha=0.3)
+        for axis in ax:
+            count_axis(axis)
         if "time_to_solve_s" in summary:
             fig.suptitle(f"{summary.get('task')} / {summary.get('algo')}: solved "
-                         f"({summary.get('target_success', 0.95):.0%}) after {summary['timesteps_to_solve']} steps, "
+                         f"({summary.get('target_success', 0.95):.0%}) after "
+                         f"{format_count(summary['timesteps_to_solve'])} steps, "
                          f"{summary['time_to_solve_s'] / 60:.1f} min on {machine.get('cores')} cores")
     fig.tight_layout()
     fig.savefig(out, dpi=110)

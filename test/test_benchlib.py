@@ -1,0 +1,179 @@
+"""tools/benchlib.py, what the benchmarks share: percentiles, verdicts, result files and
+summary.json; and the rule that nothing in tools/ imports a command-line module."""
+import ast
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+TOOLS = REPO / "tools"
+sys.path.insert(0, str(TOOLS))
+
+import benchlib  # noqa: E402
+from fr5_rl.runtime.bundle import machine_description  # noqa: E402
+
+
+# ----------------------------------------------------------------------------- percentiles
+def test_percentiles_of_known_data():
+    values = list(range(1, 101))  # 1..100, numpy's linear interpolation
+    assert benchlib.percentiles(values) == {"p50": pytest.approx(50.5), "p99": pytest.approx(99.01)}
+    assert benchlib.percentiles([3.0, 1.0, 2.0], points=(0, 50, 100)) == {"p0": 1.0, "p50": 2.0, "p100": 3.0}
+    assert benchlib.percentiles([]) == {"p50": None, "p99": None}
+
+
+def test_latency_in_milliseconds_skips_non_finite_samples():
+    seconds = [i / 1000.0 for i in range(1, 101)] + [float("nan"), float("inf")]
+    stats = benchlib.latency_ms(seconds, points=(50, 90, 99), mean=True, digits=3)
+    assert stats == {"p50_ms": 50.5, "p90_ms": 90.1, "p99_ms": 99.01, "mean_ms": 50.5, "max_ms": 100.0,
+                     "samples": 100}
+    assert benchlib.latency_ms([]) == {"p50_ms": None, "p99_ms": None, "max_ms": None, "samples": 0}
+
+
+# ----------------------------------------------------------------------------- verdicts
+@pytest.mark.parametrize("measured, target, comparison, met", [
+    (0.05, 0.2, benchlib.AT_MOST, True),
+    (0.2, 0.2, benchlib.AT_MOST, True),    # the target itself counts
+    (0.25, 0.2, benchlib.AT_MOST, False),
+    (153.0, 100.0, benchlib.AT_LEAST, True),
+    (100.0, 100.0, benchlib.AT_LEAST, True),
+    (74.6, 100.0, benchlib.AT_LEAST, False),
+    (None, 100.0, benchlib.AT_LEAST, False),  # nothing measured is never met
+    (None, 3.0, benchlib.AT_MOST, False),
+])
+def test_verdict_both_ways(measured, target, comparison, met):
+    result = benchlib.verdict(measured, target, comparison, "ms", "latency p99")
+    assert result["met"] is met
+    assert result["verdict"] == ("met" if met else "not met")
+    assert result["comparison"] == comparison and result["target"] == target
+    assert result["text"].startswith("latency p99 ") and result["text"].endswith(": met" if met else ": not met")
+    if measured is not None:
+        assert ("<=" if comparison == benchlib.AT_MOST else ">=") in result["text"]
+    assert benchlib.pass_fail(result) == ("PASS" if met else "FAIL")
+
+
+def test_verdict_refuses_an_unknown_comparison():
+    with pytest.raises(ValueError):
+        benchlib.verdict(1.0, 2.0, "below")
+
+
+# ----------------------------------------------------------------------------- result files
+def test_written_result_has_the_machine_and_no_absolute_repository_path(tmp_path):
+    verdicts = {"p99_ms": benchlib.verdict(0.1, 0.2, benchlib.AT_MOST, "ms")}
+    data = {"model_dir": REPO / "models" / "reach", "reason": f"{REPO / 'models' / 'none'} does not exist",
+            "nested": [{"path": str(REPO / "bench" / "results")}], "value": np.float64(1.5),
+            "outside": Path("/opt/elsewhere/model")}
+    path = benchlib.write_result(tmp_path / "bench_x.json", data, verdicts, machine={"load": 0.5})
+    text = path.read_text()
+    assert str(REPO) not in text
+    assert "/opt/elsewhere" not in text
+    result = json.loads(text)
+    for key, value in machine_description().items():
+        assert result["machine"][key] == value
+    assert result["machine"]["load"] == 0.5
+    assert result["model_dir"] == "models/reach"
+    assert result["reason"] == "models/none does not exist"
+    assert result["nested"][0]["path"] == "bench/results"
+    assert result["outside"] == ".../model"
+    assert result["value"] == 1.5
+    assert result["generated"] and result["verdicts"]["p99_ms"]["met"] is True
+
+
+def test_relative_path():
+    assert benchlib.relative_path(REPO / "docs" / "bench") == "docs/bench"
+    assert benchlib.relative_path(REPO) == "."
+    assert benchlib.relative_path("models/reach") == "models/reach"
+    assert benchlib.relative_path(Path("/somewhere/else/run")) == ".../run"
+    assert benchlib.RESULTS_DIR == REPO / "bench" / "results"
+    assert benchlib.DOCS_BENCH_DIR == REPO / "docs" / "bench"
+
+
+# ----------------------------------------------------------------------------- summary.json
+def _write(results, name, met):
+    verdicts = {"target": benchlib.verdict(1.0 if met else 3.0, 2.0, benchlib.AT_MOST, "ms", name)}
+    return benchlib.write_result(results / f"{name}.json", {"quick": True}, verdicts)
+
+
+def test_summary_update_keeps_the_other_benches(tmp_path):
+    (tmp_path / "summary.json").write_text(json.dumps({"verdicts": {"old.format": "PASS"}, "results": {}}))
+    benchlib.update_summary(tmp_path, "bench_a", _write(tmp_path, "bench_a", met=True))
+    benchlib.update_summary(tmp_path, "bench_b", _write(tmp_path, "bench_b", met=True))
+    summary = benchlib.update_summary(tmp_path, "bench_a", _write(tmp_path, "bench_a", met=False))
+    data = json.loads(summary.read_text())
+    assert set(data["benches"]) == {"bench_a", "bench_b"}
+    assert data["benches"]["bench_a"]["verdicts"]["target"]["met"] is False  # replaced
+    assert data["benches"]["bench_b"]["verdicts"]["target"]["met"] is True   # kept
+    assert data["benches"]["bench_b"]["file"] == "bench_b.json"
+    assert set(data["verdicts"]) == {"bench_a.target", "bench_b.target"}
+    assert data["verdicts"]["bench_a.target"].endswith("not met")
+    assert (data["targets_met"], data["targets_not_met"]) == (1, 1)
+
+
+def test_summary_rebuilt_from_the_result_files(tmp_path):
+    _write(tmp_path, "bench_a", met=True)
+    _write(tmp_path, "bench_b", met=False)
+    (tmp_path / "no_verdicts.json").write_text("{}")
+    data = json.loads(benchlib.rebuild_summary(tmp_path).read_text())
+    assert set(data["benches"]) == {"bench_a", "bench_b"}
+    assert (data["targets_met"], data["targets_not_met"]) == (1, 1)
+
+
+def test_published_summary_carries_every_bench():
+    """docs/bench/summary.json: a verdict for every result file published beside it (env
+    speed, inference, the ROS loops, time to solve), each the same as in its file."""
+    docs = benchlib.DOCS_BENCH_DIR
+    summary = json.loads((docs / "summary.json").read_text())
+    results = sorted(p.stem for p in docs.glob("*.json") if p.name != "summary.json")
+    assert {"env_speed", "inference", "ros_loop_reach", "time_to_solve_reach"} <= set(results)
+    assert sorted(summary["benches"]) == results
+    for name in results:
+        verdicts = json.loads((docs / f"{name}.json").read_text())["verdicts"]
+        assert verdicts, f"{name}.json has no verdicts"
+        assert summary["benches"][name]["verdicts"] == verdicts, f"summary.json is stale for {name}"
+
+
+# ----------------------------------------------------------------------------- imports of tools/
+FORBIDDEN_MODULES = ("fr5_rl.cli", "fr5_rl.policy", "fr5_rl.training.artifacts", "fr5_rl.training.evaluate",
+                     "fr5_rl.training.export_onnx")
+# Command-line paths of library modules (they take an argparse.Namespace).
+FORBIDDEN_NAMES = {"fr5_rl.training.train": {"train"}, "fr5_rl.training.imitation": {"run_dagger"}}
+
+
+def forbidden_imports(source: str):
+    """The imports in ``source`` of a command-line module or a removed module."""
+    found = []
+
+    def check(module: str, line: int) -> None:
+        if any(module == bad or module.startswith(bad + ".") for bad in FORBIDDEN_MODULES):
+            found.append((line, module))
+
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                check(alias.name, node.lineno)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            for alias in node.names:  # also catches `from fr5_rl.training import evaluate`
+                check(f"{node.module}.{alias.name}", node.lineno)
+                if alias.name in FORBIDDEN_NAMES.get(node.module, ()):
+                    found.append((node.lineno, f"{node.module}.{alias.name}"))
+    return found
+
+
+def test_the_import_check_finds_forbidden_imports():
+    bad = ("import fr5_rl.cli.evaluate\nfrom fr5_rl.cli import train\nfrom fr5_rl import cli\n"
+           "from fr5_rl.training import evaluate, export_onnx\nfrom fr5_rl.policy import load_policy\n"
+           "from fr5_rl.training.artifacts import META_FILE\nfrom fr5_rl.training.train import train\n"
+           "def f():\n    from fr5_rl.training.imitation import run_dagger\n")
+    assert [line for line, _ in forbidden_imports(bad)] == [1, 2, 3, 4, 4, 5, 6, 7, 9]
+    good = ("from fr5_rl.training.evaluation import run_episodes\nfrom fr5_rl.training.onnx_export import export\n"
+            "from fr5_rl.runtime.policy import load_policy\nfrom fr5_rl.training.train import make_vec_env\n")
+    assert forbidden_imports(good) == []
+
+
+def test_no_tool_imports_a_command_line_or_removed_module():
+    tools = sorted(TOOLS.glob("*.py"))
+    assert {"bench.py", "bench_ros.py", "bench_train.py", "benchlib.py", "ship_model.py"} <= {p.name for p in tools}
+    offences = {p.name: forbidden_imports(p.read_text(encoding="utf-8")) for p in tools}
+    assert {name: found for name, found in offences.items() if found} == {}
