@@ -43,6 +43,12 @@ def joint_reading(positions=None, received=NOW, velocities=None, width=0.08) -> 
     return Reading(ArmJointState(positions, velocities, width), received)
 
 
+def partial_reading() -> Reading:
+    reader = JointStateReader(ROBOT.joint_names, ())
+    reader.update(["j1", "j2"], [0.0, 0.0], [], 0.0, NOW)
+    return reader.reading()
+
+
 def inputs(joints="good", target="good", now=NOW) -> StepInputs:
     joints = joint_reading() if joints == "good" else joints
     target = Reading(TARGET, NOW) if target == "good" else target
@@ -63,8 +69,7 @@ def test_good_inputs_give_a_command_within_limits():
 @pytest.mark.parametrize("case, expected", [
     (lambda s: setattr(s, "enabled", False) or inputs(), HoldReason.DISABLED),
     (lambda s: inputs(joints=None), HoldReason.NO_JOINT_STATE),
-    (lambda s: inputs(joints=JointStateReader(ROBOT.joint_names, ()).read(["j1", "j2"], [0, 0], [], 0.0, NOW)),
-     HoldReason.JOINT_STATE_INVALID),
+    (lambda s: inputs(joints=partial_reading()), HoldReason.JOINT_STATE_INVALID),
     (lambda s: inputs(joints=joint_reading(received=NOW - 0.15)), HoldReason.JOINT_STATE_STALE),
     (lambda s: inputs(target=None), HoldReason.NO_TARGET),
     (lambda s: inputs(target=Reading(None, NOW, "no transform camera_link -> base_link")), HoldReason.TARGET_UNAVAILABLE),
@@ -149,3 +154,95 @@ def test_gate_refuses(targets, words):
 def test_gate_passes_a_step_at_the_velocity_limit():
     assert GATE.check(HOME + ROBOT.velocity_limits * DT * 0.999, HOME) is None
     assert GATE.check(HOME + ROBOT.velocity_limits * DT * 1.01, HOME) is not None
+
+
+# ----------------------------------------------------------------------------- adversarial inputs
+@pytest.mark.parametrize("target, expected", [
+    (Reading((50.0, 0.0, 0.03), NOW), HoldReason.TARGET_OUT_OF_WORKSPACE),
+    (Reading((-0.5, 0.1, -0.5), NOW), HoldReason.TARGET_OUT_OF_WORKSPACE),  # under the table
+    (Reading(TARGET, NOW, stamp=5000.0 - 3600.0), HoldReason.TARGET_STALE),  # an hour-old detection
+    (Reading(TARGET, NOW, stamp=5000.0 + 3600.0), HoldReason.TARGET_FROM_FUTURE),
+    (Reading(TARGET, NOW, stamp=5000.0 - 0.6), HoldReason.TARGET_STALE),  # arrived now, captured 0.6 s ago
+], ids=["50 m away", "below the table", "stamp an hour old", "stamp an hour ahead", "captured 0.6 s ago"])
+def test_targets_that_must_not_drive_the_arm(target, expected):
+    result = make_step()(StepInputs(NOW, joint_reading(), target, stamp_now=5000.0))
+    assert isinstance(result, Hold) and result.reason is expected, result
+
+
+def test_fresh_stamp_and_edge_of_workspace_are_accepted():
+    edge = (float(ENV_CFG["workspace"]["low"][0]) - 0.04, 0.0, 0.03)  # within the 5 cm margin
+    for target in (Reading(TARGET, NOW, stamp=4999.99), Reading(edge, NOW, stamp=5000.0)):
+        assert isinstance(make_step()(StepInputs(NOW, joint_reading(), target, stamp_now=5000.0)), Command)
+
+
+ARM = list(ROBOT.joint_names)
+FINGERS = list(ROBOT.finger_joint_names)
+
+
+def reader() -> JointStateReader:
+    return JointStateReader(ROBOT.joint_names, ROBOT.finger_joint_names)
+
+
+def test_a_joint_named_twice_is_refused_until_a_good_message():
+    joints = reader()
+    home = list(ROBOT.home_joint_positions)
+    problem = joints.update(ARM + ["j3"], home + [home[2] + 0.47], [0.0] * 7, 1.0, NOW)
+    assert problem and "j3 twice" in problem
+    reading = joints.reading()
+    assert reading.value is None and "twice" in reading.problem
+    assert isinstance(make_step()(inputs(joints=reading)), Hold)
+    joints.update(ARM, home, [0.0] * 6, 1.01, NOW + 0.01)
+    assert joints.reading().problem is None
+
+
+def test_arm_and_fingers_in_separate_messages_merge():
+    joints = reader()
+    home = list(ROBOT.home_joint_positions)
+    for k in range(20):  # alternating publishers, as an arm driver and a gripper driver do
+        if k % 2:
+            joints.update(FINGERS, [0.02, 0.02], [0.0, 0.0], 1.0 + k * 0.01, NOW + k * 0.01)
+        else:
+            joints.update(list(reversed(ARM)), list(reversed(home)), [0.0] * 6, 1.0 + k * 0.01, NOW + k * 0.01)
+        reading = joints.reading()
+        assert reading.problem is None, reading.problem
+        np.testing.assert_allclose(reading.value.positions, home)
+    assert reading.value.gripper_width == pytest.approx(0.04)
+    assert isinstance(make_step()(inputs(joints=reading, now=NOW + 0.2)), Command)
+
+
+def test_one_silent_joint_makes_the_state_stale():
+    joints = reader()
+    home = list(ROBOT.home_joint_positions)
+    joints.update(ARM, home, [0.0] * 6, 1.0, NOW - 1.0)
+    joints.update(ARM[:5], home[:5], [0.0] * 5, 2.0, NOW)  # j6 not heard from for a second
+    reading = joints.reading()
+    assert reading.received == pytest.approx(NOW - 1.0)
+    result = make_step()(inputs(joints=reading))
+    assert isinstance(result, Hold) and result.reason is HoldReason.JOINT_STATE_STALE
+
+
+@pytest.mark.parametrize("names, positions, velocities, words", [
+    (ARM, [0.0] * 5, [], "names but 5 positions"),
+    (ARM, [0.0] * 6, [0.0] * 3, "3 velocities"),
+    (ARM, [0.0, math.nan, 0, 0, 0, 0], [], "NaN"),
+    (ARM, [0.0] * 6, [0, 0, 0, 0, 0, math.inf], "NaN or inf"),
+    (ARM, ["a"] * 6, [], "not a number"),
+])
+def test_malformed_messages_are_refused(names, positions, velocities, words):
+    problem = reader().update(names, positions, velocities, 1.0, NOW)
+    assert problem and words in problem, problem
+
+
+def test_unknown_joints_are_ignored_and_missing_ones_named():
+    joints = reader()
+    joints.update(["joint1", "j1", "j2"], [9.0, 0.1, 0.2], [], 1.0, NOW)
+    reading = joints.reading()
+    assert reading.value is None and "j3" in reading.problem
+
+
+def test_velocities_are_estimated_per_joint_when_left_out():
+    joints = reader()
+    home = np.array(ROBOT.home_joint_positions)
+    joints.update(ARM, list(home), [], 1.0, NOW)
+    joints.update(ARM, list(home + 0.01), [], 1.02, NOW + 0.02)
+    np.testing.assert_allclose(joints.reading().value.velocities, 0.5, atol=1e-9)

@@ -315,6 +315,8 @@ class PolicyNodeParams:
     base_frame: str
     joint_state_timeout: float
     target_timeout: float
+    future_stamp_tolerance: float
+    target_workspace_margin: float
     joint_states_topic: str
     target_topic: str
     command_topic: str

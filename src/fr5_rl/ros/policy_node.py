@@ -55,14 +55,15 @@ class PolicyNode:
         robot = load_robot_spec()
         policy = load_policy(model_dir, params.backend)
         env_cfg = load_env_config(policy.meta.get("env_overrides", {}))
-        self.step = DeploymentStep(policy, robot, env_cfg, params.joint_state_timeout, params.target_timeout)
+        self.step = DeploymentStep(policy, robot, env_cfg, params.joint_state_timeout, params.target_timeout,
+                                   target_workspace_margin=params.target_workspace_margin,
+                                   future_stamp_tolerance=params.future_stamp_tolerance)
         self.control_dt = self.step.control_dt
         if abs(params.rate * self.control_dt - 1.0) > 1e-6:
             raise ConfigError(f"~rate = {params.rate:g} Hz but the model was trained at {1.0 / self.control_dt:g} Hz: "
                               "the action scaling would be wrong; set ~rate to the training rate")
         self.step.enabled = params.enabled
         self.reader = JointStateReader(robot.joint_names, robot.finger_joint_names)
-        self.joint_state: Optional[Reading] = None
         self.joint_state_stamp = rospy.Time(0)
         self.target: Optional[PoseStamped] = None
         self.target_received = 0.0
@@ -86,9 +87,9 @@ class PolicyNode:
 
     # ------------------------------------------------------------------ inputs
     def on_joint_state(self, message: JointState) -> None:
-        self.joint_state = self.reader.read(message.name, message.position, message.velocity,
-                                            message.header.stamp.to_sec(), time.monotonic())
-        self.joint_state_stamp = message.header.stamp
+        if self.reader.update(message.name, message.position, message.velocity, message.header.stamp.to_sec(),
+                              time.monotonic()) is None:
+            self.joint_state_stamp = message.header.stamp
 
     def on_target(self, message: PoseStamped) -> None:
         self.target, self.target_received = message, time.monotonic()
@@ -107,7 +108,7 @@ class PolicyNode:
         except TF_ERRORS as error:
             return Reading(None, received, f"no transform {message.header.frame_id} -> {self.params.base_frame}: {error}")
         position = tf2_geometry_msgs.do_transform_pose(message, transform).pose.position
-        return Reading((position.x, position.y, position.z), received)
+        return Reading((position.x, position.y, position.z), received, stamp=message.header.stamp.to_sec())
 
     # ------------------------------------------------------------------ the 50 Hz loop
     def on_timer(self, event) -> None:
@@ -115,7 +116,8 @@ class PolicyNode:
         period = start - self.last_tick if self.last_tick is not None else self.control_dt
         self.last_tick = start
         previous_hold = self.step.last_hold
-        result = self.step(StepInputs(time.monotonic(), self.joint_state, self.target_in_base()))
+        result = self.step(StepInputs(time.monotonic(), self.reader.reading(), self.target_in_base(),
+                                        rospy.Time.now().to_sec()))
         if isinstance(result, Hold):
             self.report_hold(result, previous_hold)
             return

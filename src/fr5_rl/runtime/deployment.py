@@ -36,7 +36,9 @@ class HoldReason(enum.Enum):
     NO_TARGET = "no target received yet"
     TARGET_UNAVAILABLE = "target not transformable"
     TARGET_STALE = "target stale"
+    TARGET_FROM_FUTURE = "target stamped in the future"
     TARGET_INVALID = "target invalid"
+    TARGET_OUT_OF_WORKSPACE = "target outside the workspace"
     OBSERVATION_INVALID = "observation invalid"
     UNSAFE_COMMAND = "command failed the safety gate"
 
@@ -79,11 +81,14 @@ class StepInputs:
     :param now: current time (s) on the same monotonic clock as the readings' ``received``.
     :param joint_state: newest joint-state reading, None if none arrived yet.
     :param target: newest target reading (position in ``base_link``, m), None if none yet.
+    :param stamp_now: current time (s) on the clock the messages are stamped with (ROS time),
+        to judge the target's stamp; 0 to judge by arrival only.
     """
 
     now: float
     joint_state: Optional[Reading[ArmJointState]]
     target: Optional[Reading[Sequence[float]]]
+    stamp_now: float = 0.0
 
 
 class SafetyGate:
@@ -130,10 +135,15 @@ class DeploymentStep:
     :param target_timeout: older targets (s) hold the arm.
     :param new_target_jump: a target that moves further than this (m) between two periods is a
         new object: the action filter restarts, as at the start of an episode.
+    :param target_workspace_margin: a target may lie this far (m) outside the training
+        workspace box (``env.yaml`` ``workspace``) before the step holds.
+    :param future_stamp_tolerance: a target stamped more than this (s) ahead of ``stamp_now``
+        comes from a clock that cannot be trusted: hold.
     """
 
     def __init__(self, policy: Policy, robot: RobotSpec, env_cfg: Mapping[str, Any], joint_state_timeout: float,
-                 target_timeout: float, new_target_jump: float = 0.05) -> None:
+                 target_timeout: float, new_target_jump: float = 0.05, target_workspace_margin: float = 0.05,
+                 future_stamp_tolerance: float = 0.05) -> None:
         self.policy = policy
         self.control_dt = float(env_cfg["simulation"]["control_dt"])
         self.kinematics = ForwardKinematics(robot)
@@ -147,6 +157,10 @@ class DeploymentStep:
         self.joint_state_timeout = float(joint_state_timeout)
         self.target_timeout = float(target_timeout)
         self.new_target_jump = float(new_target_jump)
+        margin = float(target_workspace_margin)
+        self.target_low = np.asarray(env_cfg["workspace"]["low"], dtype=np.float64) - margin
+        self.target_high = np.asarray(env_cfg["workspace"]["high"], dtype=np.float64) + margin
+        self.future_stamp_tolerance = float(future_stamp_tolerance)
         self.enabled = True
         # The commanded width is part of the next observation whether or not it is sent, as in
         # training; the gripper starts open, as every episode does.
@@ -178,6 +192,12 @@ class DeploymentStep:
         if target.problem is not None:
             return Hold(HoldReason.TARGET_UNAVAILABLE, target.problem)
         age = inputs.now - target.received
+        if target.stamp > 0.0 and inputs.stamp_now > 0.0:
+            ahead = target.stamp - inputs.stamp_now
+            if ahead > self.future_stamp_tolerance:
+                return Hold(HoldReason.TARGET_FROM_FUTURE, f"stamped {ahead:.3f} s ahead of now "
+                            f"(> {self.future_stamp_tolerance:g} s): check the camera computer's clock")
+            age = max(age, -ahead)  # judged by capture time: a pipeline may deliver old detections
         if age > self.target_timeout:
             return Hold(HoldReason.TARGET_STALE, f"{age:.2f} s old > {self.target_timeout:g} s")
         target_in_base = np.asarray(target.value, dtype=np.float64).reshape(-1)
@@ -185,6 +205,10 @@ class DeploymentStep:
             return Hold(HoldReason.TARGET_INVALID, f"target position needs 3 values, got {target.value}")
         if not np.isfinite(target_in_base).all():
             return Hold(HoldReason.TARGET_INVALID, f"target position contains NaN or inf: {target.value}")
+        if np.any(target_in_base < self.target_low) or np.any(target_in_base > self.target_high):
+            return Hold(HoldReason.TARGET_OUT_OF_WORKSPACE,
+                        f"target at {np.round(target_in_base, 3).tolist()} m (base) lies outside "
+                        f"{np.round(self.target_low, 3).tolist()}..{np.round(self.target_high, 3).tolist()} m")
 
         state = joints.value
         tcp_position, tcp_rotation = self.kinematics.tcp_pose(state.positions)

@@ -5,8 +5,10 @@ looked up by name, and anything missing, mis-sized or non-finite is rejected wit
 """
 from __future__ import annotations
 
+import math
+import threading
 from dataclasses import dataclass
-from typing import Generic, Optional, Sequence, Tuple, TypeVar
+from typing import Dict, Generic, Optional, Sequence, Tuple, TypeVar
 
 import numpy as np
 
@@ -20,11 +22,13 @@ class Reading(Generic[T]):
     :param value: the value; None when ``problem`` is set.
     :param received: arrival time (s) on the caller's monotonic clock.
     :param problem: why the input is unusable (a parse or tf failure), else None.
+    :param stamp: the message's header stamp (s, ROS time); 0 when it carries none.
     """
 
     value: Optional[T]
     received: float
     problem: Optional[str] = None
+    stamp: float = 0.0
 
 
 @dataclass
@@ -36,37 +40,16 @@ class ArmJointState:
     gripper_width: Optional[float]
 
 
-def parse_joint_state(names: Sequence[str], positions: Sequence[float], velocities: Sequence[float],
-                      arm_joint_names: Sequence[str], finger_joint_names: Sequence[str]) -> ArmJointState:
-    """Extract the arm (and finger) joints by name; raises ValueError saying what is wrong."""
-    if len(positions) != len(names):
-        raise ValueError(f"joint_states has {len(names)} names but {len(positions)} positions")
-    index = {name: i for i, name in enumerate(names)}
-    missing = [name for name in arm_joint_names if name not in index]
-    if missing:
-        unknown = [name for name in names if name not in arm_joint_names and name not in finger_joint_names]
-        raise ValueError(f"joint_states lacks {missing}" + (f" (it has unknown joints {unknown[:8]})" if unknown else ""))
-    arm = np.array([positions[index[name]] for name in arm_joint_names], dtype=np.float64)
-    if not np.isfinite(arm).all():
-        raise ValueError("joint_states positions contain NaN or inf")
-    arm_velocities = None
-    if len(velocities) == len(names):
-        arm_velocities = np.array([velocities[index[name]] for name in arm_joint_names], dtype=np.float64)
-        if not np.isfinite(arm_velocities).all():
-            raise ValueError("joint_states velocities contain NaN or inf")
-    width = None
-    if all(name in index for name in finger_joint_names):
-        width = float(sum(positions[index[name]] for name in finger_joint_names))
-        if not np.isfinite(width):
-            raise ValueError("joint_states finger positions contain NaN or inf")
-    return ArmJointState(arm, arm_velocities, width)
-
-
 class JointStateReader:
-    """Turns joint-state messages into :class:`Reading` s of :class:`ArmJointState`.
+    """Merges joint-state messages *by name* into the newest :class:`ArmJointState`.
 
-    A driver that publishes no velocities (some do not) gets them estimated from consecutive
-    messages' positions and stamps.
+    ``/joint_states`` may come from several publishers (the arm's driver, a gripper driver),
+    each with some joints, in any order. Every joint keeps its newest value and when it came;
+    a reading's ``received`` is the arrival of its *oldest* arm joint, so one silent joint makes
+    the whole state stale. A message that names a joint twice, or holds NaN or inf, or whose
+    arrays do not match its names, is refused as a whole and holds the arm until a good message
+    brings the joints it was about. Velocities a driver leaves out are estimated per joint
+    from consecutive positions and stamps. Thread-safe: ROS callbacks update, the timer reads.
 
     :param arm_joint_names: the arm's joints in controller order (``j1`` … ``j6``).
     :param finger_joint_names: the gripper's finger joints (their sum is the opening width).
@@ -75,23 +58,74 @@ class JointStateReader:
     def __init__(self, arm_joint_names: Sequence[str], finger_joint_names: Sequence[str]) -> None:
         self.arm_joint_names = tuple(arm_joint_names)
         self.finger_joint_names = tuple(finger_joint_names)
-        self._previous: Optional[Tuple[np.ndarray, float]] = None  # positions, stamp (s)
+        self._known = set(self.arm_joint_names) | set(self.finger_joint_names)
+        # name -> (position rad|m, velocity or None, stamp s, received s)
+        self._joints: Dict[str, Tuple[float, Optional[float], float, float]] = {}
+        self._problem: Optional[Tuple[str, float, frozenset]] = None  # text, received, joints it was about
+        self._lock = threading.Lock()
 
-    def read(self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float],
-             stamp: float, received: float) -> Reading[ArmJointState]:
-        """One message, as a reading.
+    def update(self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float],
+               stamp: float, received: float) -> Optional[str]:
+        """Take one message; returns what is wrong with it, or None.
 
         :param stamp: the message's header stamp (s); 0 when the driver leaves it empty.
         :param received: arrival time (s) on the caller's monotonic clock.
         """
-        try:
-            state = parse_joint_state(names, positions, velocities, self.arm_joint_names, self.finger_joint_names)
-        except ValueError as error:
-            return Reading(None, received, str(error))
-        if state.velocities is None:
+        problem = self._check(names, positions, velocities)
+        with self._lock:
+            if problem is not None:
+                about = frozenset(name for name in names if name in self._known) or frozenset(self.arm_joint_names)
+                self._problem = (problem, received, about)
+                return problem
             stamp = stamp or received
-            state.velocities = np.zeros(len(self.arm_joint_names))
-            if self._previous is not None and stamp - self._previous[1] > 1e-4:
-                state.velocities = (state.positions - self._previous[0]) / (stamp - self._previous[1])
-            self._previous = (state.positions, stamp)
-        return Reading(state, received)
+            for index, name in enumerate(names):
+                if name not in self._known:
+                    continue  # other joints on the topic are none of the policy's business
+                position = float(positions[index])
+                velocity = float(velocities[index]) if len(velocities) == len(names) else None
+                if velocity is None:
+                    previous = self._joints.get(name)
+                    velocity = 0.0
+                    if previous is not None and stamp - previous[2] > 1e-4:
+                        velocity = (position - previous[0]) / (stamp - previous[2])
+                self._joints[name] = (position, velocity, stamp, received)
+            if self._problem is not None and self._problem[2] <= set(names):
+                self._problem = None  # a good message brought every joint the bad one was about
+        return None
+
+    def _check(self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float]) -> Optional[str]:
+        if len(positions) != len(names):
+            return f"joint_states has {len(names)} names but {len(positions)} positions"
+        if len(velocities) not in (0, len(names)):
+            return f"joint_states has {len(names)} names but {len(velocities)} velocities"
+        seen = set()
+        for name in names:
+            if name in seen:
+                return f"joint_states names {name} twice: which value is true cannot be known"
+            seen.add(name)
+        try:
+            values = [float(positions[i]) for i, name in enumerate(names) if name in self._known]
+            if len(velocities) == len(names):
+                values += [float(velocities[i]) for i, name in enumerate(names) if name in self._known]
+        except (TypeError, ValueError):
+            return "joint_states holds something that is not a number"
+        if not all(math.isfinite(value) for value in values):
+            return "joint_states positions or velocities contain NaN or inf"
+        return None
+
+    def reading(self) -> Optional[Reading[ArmJointState]]:
+        """The merged state; None before any message; a problem when unusable."""
+        with self._lock:
+            if self._problem is not None:
+                return Reading(None, self._problem[1], self._problem[0])
+            if not self._joints:
+                return None
+            missing = [name for name in self.arm_joint_names if name not in self._joints]
+            if missing:
+                newest = max(entry[3] for entry in self._joints.values())
+                return Reading(None, newest, f"joint_states lacks {missing} (no message has named them)")
+            arm = [self._joints[name] for name in self.arm_joint_names]
+            fingers = [self._joints.get(name) for name in self.finger_joint_names]
+        width = sum(f[0] for f in fingers) if fingers and all(f is not None for f in fingers) else None
+        state = ArmJointState(np.array([a[0] for a in arm]), np.array([a[1] for a in arm]), width)
+        return Reading(state, min(a[3] for a in arm))
