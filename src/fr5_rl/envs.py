@@ -4,30 +4,126 @@ One ``step`` is one 50 Hz control period: the action goes through the same
 :class:`~fr5_rl.control.JointCommandShaper` the ROS policy node uses, the simulated position
 controller tracks it for ``control_dt`` seconds, and the observation is built by the same
 :class:`~fr5_rl.observation.ObservationBuilder` from measured joint state.
+
+Beside the gymnasium API, :class:`FR5Env` offers what a real-time stand-in for the arm (the
+ROS simulator node) needs, without reaching into the simulator: :meth:`FR5Env.advance_physics`,
+:meth:`FR5Env.judge_period`, :meth:`FR5Env.joint_states`, :meth:`FR5Env.object_pose` and
+:meth:`FR5Env.scene`. Only :mod:`fr5_rl.sim` talks to PyBullet.
 """
 from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Any, Dict, List, Mapping, Optional, Tuple
+from dataclasses import dataclass
+from typing import Any, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import gymnasium as gym
 import numpy as np
-import pybullet as p
 from gymnasium import spaces
 
-from .config import load_env_config, load_robot_spec, simulation_settings
+from .config import load_env_config, load_robot_spec, object_rest_z, simulation_settings
 from .control import ACTION_SIZE, JointCommandShaper, finite_values
 from .kinematics import ForwardKinematics
 from .observation import ObservationBuilder
 from .sim.robot import FR5Robot
 from .sim.world import PyBulletWorld
-from .tasks import GraspTask, ReachTask, Task, TaskState
+from .tasks import GraspTask, ReachTask, Task, TaskOutcome, TaskState
 from .transforms import quaternion_z_axis
 
 TASKS = {"reach": ReachTask, "grasp": GraspTask}
 _REWARD_KEYS = {name: f"reward_{name}" for name in ("success", "collision", "progress", "action")}
 _TERM_KEYS = {name: f"term_{name}" for name in ("approach", "orientation", "gripper", "lift")}
+
+
+class EpisodeVerdict(NamedTuple):
+    """How one control period left the episode (see :meth:`FR5Env.judge_period`).
+
+    :param success: the task's success test passed this period.
+    :param failure: why the episode failed (the task's reason, e.g. ``"collision"``, or
+        ``"timeout"`` when the step limit ended it), else None.
+    :param terminated: the episode ended by success or a task failure (gymnasium's
+        ``terminated``).
+    :param truncated: the step limit ended it first (gymnasium's ``truncated``; ``failure``
+        is then ``"timeout"``).
+    :param steps: control periods judged since the reset, this one included.
+    :param outcome: the task's own verdict, with the unweighted shaping terms the reward
+        is made of (its ``failure`` never says ``"timeout"``).
+    """
+
+    success: bool
+    failure: Optional[str]
+    terminated: bool
+    truncated: bool
+    steps: int
+    outcome: TaskOutcome
+
+    @property
+    def ended(self) -> bool:
+        """The episode is over (``terminated or truncated``)."""
+        return self.terminated or self.truncated
+
+    @property
+    def terms(self) -> Dict[str, float]:
+        """The task's unweighted shaping terms of this period, by name."""
+        return self.outcome.terms
+
+
+class JointStates(NamedTuple):
+    """Measured state of the eight joints, by name, as ``sensor_msgs/JointState`` carries it.
+
+    :param names: the arm joints ``j1`` .. ``j6`` (controller order), then the two finger joints.
+    :param positions: arm angles (rad), then each finger's travel from closed (m; the opening
+        width is their sum).
+    :param velocities: arm (rad/s), then fingers (m/s).
+    """
+
+    names: Tuple[str, ...]
+    positions: Tuple[float, ...]
+    velocities: Tuple[float, ...]
+
+
+class Pose(NamedTuple):
+    """A pose in a named frame.
+
+    :param position: (x, y, z) in metres.
+    :param quaternion: (x, y, z, w), unit.
+    :param frame_id: the frame both are expressed in (``base_link`` here).
+    """
+
+    position: Tuple[float, float, float]
+    quaternion: Tuple[float, float, float, float]
+    frame_id: str
+
+
+@dataclass(frozen=True)
+class SceneDescription:
+    """The static scene of the current episode, for drawing it (e.g. rviz markers).
+
+    :param frame_id: the frame of every position below (``base_link``, the world frame).
+    :param table_size: table box (x, y, thickness) in metres.
+    :param table_center: centre (m) of the table box.
+    :param table_top_height: z (m) of the table's top face.
+    :param object_shape: ``"cylinder"`` or ``"box"``.
+    :param object_dims: as placed this episode (after any size randomisation): (radius,
+        height) of a cylinder or (half_extent,) of a cube, metres.
+    :param object_rest_z: z (m) of the object's centre when it stands on the table.
+    """
+
+    frame_id: str
+    table_size: Tuple[float, float, float]
+    table_center: Tuple[float, float, float]
+    table_top_height: float
+    object_shape: str
+    object_dims: Tuple[float, ...]
+    object_rest_z: float
+
+    @property
+    def object_size(self) -> Tuple[float, float, float]:
+        """Extent (m) of the object along its own x, y and z axes (its bounding box)."""
+        if self.object_shape == "cylinder":
+            radius, height = self.object_dims
+            return (2.0 * radius, 2.0 * radius, height)
+        return (2.0 * self.object_dims[0],) * 3
 
 
 class FR5Env(gym.Env):
@@ -65,12 +161,11 @@ class FR5Env(gym.Env):
         self.world = PyBulletWorld(sim_cfg, gui=render_mode == "human", renders=render_mode is not None)
         self.world.add_table(self.cfg["table"])
         self.robot = FR5Robot(self.world.client, self.robot_spec, sim_cfg)
-        # The robot stands on the table: its base never counts as touching it.
-        for link in (-1, 0):
-            p.setCollisionFilterPair(self.robot.body, self.world.table_id, link, -1, 0,
-                                     physicsClientId=self.world.client)
+        self.robot.stand_on(self.world.table_id)  # its base never counts as touching the table
         obj = self.cfg["object"]
         self._object_rest_z = float(self.cfg["table"]["top_height"])  # set per episode with the object's size
+        self._object_dims: Tuple[float, ...] = ()  # set per episode
+        self._joint_state_names = tuple(self.robot_spec.joint_names) + tuple(self.robot_spec.finger_joint_names)
         self._object_start: Tuple[float, float, float] = (0.0, 0.0, self._object_rest_z)
         self._gripper_command_width = self.robot_spec.max_opening_width
         self._action_queue: deque = deque()
@@ -118,15 +213,11 @@ class FR5Env(gym.Env):
         self._gripper_command_width = self.shaper.gripper_width(applied)
         self.robot.command(targets, self._gripper_command_width)
         self.world.step()
-        self._steps += 1
 
         state, obs = self._observe()
-        outcome = self.task.judge(state, self.control_dt)
+        success, failure, terminated, truncated, _, outcome = self.judge_period(state)
         parts = self.task.reward(outcome, values)
-        terminated = outcome.success or outcome.failure is not None
-        truncated = not terminated and self._steps >= self.task.max_steps
-        info: Dict[str, Any] = {"is_success": outcome.success,
-                                "failure": "timeout" if truncated else outcome.failure}
+        info: Dict[str, Any] = {"is_success": success, "failure": failure}
         for name, value in parts.items():
             info[_REWARD_KEYS[name]] = value
         for name, value in outcome.terms.items():
@@ -154,12 +245,96 @@ class FR5Env(gym.Env):
 
     @property
     def gripper_command_width(self) -> float:
-        """Opening width (m) the last action commanded."""
+        """Opening width (m) the last action (or :meth:`advance_physics`) commanded."""
         return self._gripper_command_width
 
     def joint_positions(self) -> np.ndarray:
         """Measured arm joint angles (rad), controller order."""
         return self.robot.joint_state()[0]
+
+    def joint_states(self) -> JointStates:
+        """Measured positions and velocities of the six arm joints and the two finger joints,
+        by name (one simulator query), for ``/joint_states``.
+
+        :return: names ``j1`` .. ``j6`` then the finger joints; arm in rad and rad/s, fingers in
+            m and m/s (see :class:`JointStates`).
+        """
+        positions, velocities = self.robot.joint_lists_with_fingers()
+        return JointStates(self._joint_state_names, tuple(positions), tuple(velocities))
+
+    def object_pose(self) -> Pose:
+        """The object's pose as the simulator has it (ground truth, what a camera would see).
+
+        :return: centre position (m) and orientation quaternion (x, y, z, w) in base_link.
+        """
+        position, quaternion = self.world.object_pose()
+        return Pose(tuple(position), tuple(quaternion), self.robot_spec.base_frame)
+
+    def scene(self) -> SceneDescription:
+        """The table and the object as placed this episode (sizes after randomisation), in
+        base_link: what a viewer needs to draw the static scene. No simulator query.
+
+        :return: see :class:`SceneDescription`.
+        """
+        table = self.cfg["table"]
+        sx, sy, thickness = (float(v) for v in table["size"])
+        cx, cy = (float(v) for v in table["center_xy"])
+        top = float(table["top_height"])
+        return SceneDescription(
+            frame_id=self.robot_spec.base_frame, table_size=(sx, sy, thickness),
+            table_center=(cx, cy, top - thickness / 2.0), table_top_height=top,
+            object_shape=str(self._object_cfg["shape"]), object_dims=tuple(float(d) for d in self._object_dims),
+            object_rest_z=self._object_rest_z,
+        )
+
+    # ------------------------------------------------------------------ real-time stepping
+    @property
+    def physics_dt(self) -> float:
+        """Duration (s) of one physics step, the unit :meth:`advance_physics` advances by.
+
+        It divides :attr:`control_dt`; with ``randomisation.physics_dt_choices`` it is drawn
+        anew at every reset.
+        """
+        return self.world.physics_dt
+
+    def advance_physics(self, arm_targets: Sequence[float], gripper_width: float) -> None:
+        """Advance the simulation by one physics step (:attr:`physics_dt` seconds) with the
+        position controllers tracking the given targets: the finer-grained alternative to
+        :meth:`step` for running the arm in real time behind a driver interface.
+
+        The targets go to the joints as they are (no action scaling, smoothing or step
+        limit), so the caller keeps them inside the joint limits. Call :meth:`judge_period`
+        after every :attr:`control_dt` of simulated time to judge the episode. Within one
+        episode use either this or :meth:`step`, not both.
+
+        :param arm_targets: (6,) joint position targets (rad), controller order j1 .. j6.
+        :param gripper_width: wanted opening width (m), 0 (closed) .. the maximum opening;
+            the fingers move toward it at the gripper's rated speed.
+        """
+        self._gripper_command_width = float(gripper_width)
+        self.robot.command(arm_targets, gripper_width, period=self.world.physics_dt)
+        self.world.step_physics()
+
+    def judge_period(self, state: Optional[TaskState] = None) -> EpisodeVerdict:
+        """Count and judge one control period of the episode: the task's success and failure
+        tests, and the step limit (``"timeout"``). :meth:`step` calls it once per step; a
+        real-time driver calls it after every :attr:`control_dt` of simulated time.
+
+        Stateful, like the task: each call counts one more period (and the grasp task's hold
+        timer runs), so call it exactly once per period. :meth:`reset` starts the count over.
+
+        :param state: the state measured at the end of the period (:meth:`task_state`); None
+            measures it now (four simulator queries).
+        :return: the verdict; its ``steps`` counts the periods judged since the reset.
+        """
+        if state is None:
+            self._state = state = self.task_state()
+        self._steps = steps = self._steps + 1
+        outcome = self.task.judge(state, self.control_dt)
+        success, failure = outcome.success, outcome.failure
+        terminated = success or failure is not None
+        truncated = not terminated and steps >= self.task.max_steps
+        return EpisodeVerdict(success, "timeout" if truncated else failure, terminated, truncated, steps, outcome)
 
     # ------------------------------------------------------------------ internals
     def _delayed(self, action: List[float]) -> List[float]:
@@ -173,7 +348,7 @@ class FR5Env(gym.Env):
         return self._action_queue.popleft()
 
     def task_state(self) -> TaskState:
-        """Ground-truth state the task judges (also used by the ROS simulator node).
+        """Ground-truth state the task judges (also read by the scripted expert).
 
         Four simulator queries in all: joints, tcp link, object, contacts.
         """
@@ -233,12 +408,11 @@ class FR5Env(gym.Env):
         friction = float(obj["lateral_friction"]) * (rng.uniform(*rnd["friction_scale"]) if on else 1.0)
         if obj["shape"] == "cylinder":
             dims = (float(obj["radius"]) * size, float(obj["height"]) * size)
-            half_height = dims[1] / 2.0
         else:
             dims = (float(obj["half_extent"]) * size,)
-            half_height = dims[0]
-        self._object_rest_z = float(self.cfg["table"]["top_height"]) + half_height
+        self._object_rest_z = object_rest_z(self.cfg, size)
         self.world.set_object(str(obj["shape"]), dims, mass, friction)
+        self._object_dims = dims
         self.robot.set_joint_damping(rng.uniform(*rnd["joint_damping"]) if on else 0.0)
         # The simulated position controller tracks differently at other physics steps: drawing
         # the step per episode keeps a policy from relying on one simulator's exact response.

@@ -9,7 +9,6 @@ from __future__ import annotations
 from typing import Optional
 
 import numpy as np
-import pybullet as p
 
 from .envs import FR5Env
 from .transforms import quaternion_from_matrix
@@ -38,10 +37,6 @@ class ScriptedExpert:
         home_position, home_rotation = self.env.kinematics.tcp_pose(spec.home_joint_positions)
         # Keep the home pose's tcp yaw: only the approach axis matters to the tasks.
         self._down_quaternion = list(quaternion_from_matrix(home_rotation))
-        self._lower = spec.lower_limits.tolist() + [0.0, 0.0]
-        self._upper = spec.upper_limits.tolist() + [spec.finger_travel] * 2
-        self._ranges = [u - l for u, l in zip(self._upper, self._lower)]
-        self._rest = spec.home_joint_positions.tolist() + [0.0, 0.0]
         self._max_step = float(self.env.cfg["action"]["max_joint_step"])
         self.phase = "hover"
 
@@ -89,11 +84,5 @@ class ScriptedExpert:
         return action.astype(np.float32)
 
     def _inverse_kinematics(self, tcp_target: np.ndarray) -> np.ndarray:
-        env = self.env
-        solution = p.calculateInverseKinematics(
-            env.robot.body, env.robot.tcp_link, tcp_target.tolist(), self._down_quaternion,
-            lowerLimits=self._lower, upperLimits=self._upper, jointRanges=self._ranges,
-            restPoses=self._rest, maxNumIterations=60, residualThreshold=1e-5,
-            physicsClientId=env.world.client,
-        )
-        return np.asarray(solution[:6])
+        """Joint angles (rad) that put the tcp at ``tcp_target`` (m, base_link), pointing down."""
+        return self.env.robot.inverse_kinematics(tcp_target, self._down_quaternion)

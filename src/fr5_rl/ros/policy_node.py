@@ -112,6 +112,8 @@ class PolicyNode:
 
     # ------------------------------------------------------------------ the 50 Hz loop
     def on_timer(self, event) -> None:
+        if rospy.is_shutdown():
+            return
         start = time.perf_counter()
         period = start - self.last_tick if self.last_tick is not None else self.control_dt
         self.last_tick = start

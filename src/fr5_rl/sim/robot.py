@@ -82,6 +82,21 @@ class FR5Robot:
             p.changeDynamics(self.body, index, maxJointVelocity=robot.finger_velocity, physicsClientId=client)
         for index, velocity in zip(self.arm_joints, robot.velocity_limits):
             p.changeDynamics(self.body, index, maxJointVelocity=float(velocity), physicsClientId=client)
+        # Null-space inverse kinematics over all eight joints: the joint limits, their ranges
+        # and the home pose as the rest pose (the finger entries of the solution are ignored).
+        self._ik_lower = robot.lower_limits.tolist() + [0.0, 0.0]
+        self._ik_upper = robot.upper_limits.tolist() + [robot.finger_travel] * 2
+        self._ik_ranges = [upper - lower for upper, lower in zip(self._ik_upper, self._ik_lower)]
+        self._ik_rest = robot.home_joint_positions.tolist() + [0.0, 0.0]
+
+    def stand_on(self, body: int) -> None:
+        """Mount the robot on ``body`` (the table): its base and first link never count as
+        touching it, since they stand on it.
+
+        :param body: PyBullet body id of what the robot stands on, in this robot's client.
+        """
+        for link in (-1, 0):  # the base and the first link
+            p.setCollisionFilterPair(self.body, body, link, -1, 0, physicsClientId=self.client)
 
     # ------------------------------------------------------------------ commands
     def reset(self, joint_positions: np.ndarray, opening_width: float) -> None:
@@ -144,11 +159,40 @@ class FR5Robot:
         positions, velocities, width = self.joint_lists()
         return np.array(positions), np.array(velocities), width
 
+    def joint_lists_with_fingers(self) -> Tuple[List[float], List[float]]:
+        """Measured positions and velocities of all eight joints, as plain floats from one
+        simulator query: the arm (rad, rad/s, controller order j1 .. j6), then the two
+        fingers (m, m/s, each finger's travel from closed, in ``finger_joint_names`` order)."""
+        states = p.getJointStates(self.body, self.all_joints, physicsClientId=self.client)
+        positions, velocities, _, _ = zip(*states)
+        return list(positions), list(velocities)
+
     def tcp_pose_from_simulator(self) -> Tuple[np.ndarray, np.ndarray]:
         """tcp position (m) and 3x3 rotation in base_link, as the simulator computes them."""
         state = p.getLinkState(self.body, self.tcp_link, computeForwardKinematics=1, physicsClientId=self.client)
         rotation = np.array(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)
         return np.array(state[4]), rotation
+
+    def inverse_kinematics(self, tcp_position: Sequence[float], tcp_quaternion: Sequence[float],
+                           max_iterations: int = 60, residual_threshold: float = 1e-5) -> np.ndarray:
+        """Arm joint angles that put the tcp at a pose (PyBullet's damped least squares).
+
+        The search starts from the current joint state and is pulled toward the home pose
+        within the joint limits (null-space IK); the result is not clamped or checked.
+
+        :param tcp_position: wanted tcp position (m) in base_link.
+        :param tcp_quaternion: wanted tcp orientation (x, y, z, w) in base_link.
+        :param max_iterations: most solver iterations.
+        :param residual_threshold: the solver stops once the position error (m) is below this.
+        :return: (6,) joint angles (rad), controller order.
+        """
+        solution = p.calculateInverseKinematics(
+            self.body, self.tcp_link, [float(v) for v in tcp_position], [float(v) for v in tcp_quaternion],
+            lowerLimits=self._ik_lower, upperLimits=self._ik_upper, jointRanges=self._ik_ranges,
+            restPoses=self._ik_rest, maxNumIterations=max_iterations, residualThreshold=residual_threshold,
+            physicsClientId=self.client,
+        )
+        return np.asarray(solution[:self._n_arm])
 
     def contacts(self) -> list:
         """All contact points (PyBullet tuples) of the robot found by the last physics step."""

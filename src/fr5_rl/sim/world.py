@@ -130,6 +130,10 @@ class PyBulletWorld:
         for _ in range(self.substeps):
             p.stepSimulation(physicsClientId=self.client)
 
+    def step_physics(self) -> None:
+        """Advance one physics step (``physics_dt`` seconds)."""
+        p.stepSimulation(physicsClientId=self.client)
+
     def _unload_renderer(self) -> None:
         # The TinyRenderer is linked into PyBullet as a plugin; loading it by name returns the
         # loaded instance's id. Should a PyBullet build lack it, nothing changes.
