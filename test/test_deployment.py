@@ -246,3 +246,84 @@ def test_velocities_are_estimated_per_joint_when_left_out():
     joints.update(ARM, list(home), [], 1.0, NOW)
     joints.update(ARM, list(home + 0.01), [], 1.02, NOW + 0.02)
     np.testing.assert_allclose(joints.reading().value.velocities, 0.5, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- the safety zone
+from fr5_rl.runtime.deployment import SafetyZone, segment_distance  # noqa: E402
+
+ZONE = SafetyZone(ROBOT, ENV_CFG)
+# Configurations where the gripper is inside the forearm (found by sampling the joint limits).
+SELF_CONTACTS = [[-1.74, -0.72, 1.73, 1.26, -2.13, -0.11], [2.84, -2.17, -1.16, 0.55, -2.29, 1.43],
+                 [1.52, -1.92, -1.64, 0.9, -2.95, -1.2]]
+
+
+def test_segment_distance():
+    o, x = np.zeros(3), np.array([1.0, 0, 0])
+    assert segment_distance(o, x, np.array([0.5, 1, 0]), np.array([0.5, 2, 0])) == pytest.approx(1.0)
+    assert segment_distance(o, x, np.array([0.5, -1, 0]), np.array([0.5, 1, 0])) == pytest.approx(0.0)  # crossing
+    assert segment_distance(o, x, np.array([2.0, 0, 0]), np.array([3.0, 0, 0])) == pytest.approx(1.0)  # collinear
+    assert segment_distance(o, o, np.array([0, 3.0, 4]), np.array([0, 3.0, 4])) == pytest.approx(5.0)  # points
+
+
+def test_zone_refuses_the_table_and_self_contact():
+    assert ZONE.check(ROBOT.home_joint_positions) is None
+    down = ROBOT.home_joint_positions + np.array([0, 1.2, 0, 0, 0, 0])  # shoulder swung into the table
+    assert "table" in ZONE.check(down)
+    for q in SELF_CONTACTS:
+        assert "forearm and gripper" in (ZONE.check(q) or ""), q
+
+
+def test_zone_agrees_with_the_simulator_geometry():
+    """The capsules are not invented: PyBullet's collision shapes of the same URDF interpenetrate
+    in the self-contact configurations, and are apart at home."""
+    import pybullet as p
+
+    from fr5_rl.envs import FR5Env
+
+    env = FR5Env(task="reach")
+    env.reset(seed=0)
+    body, client = env.robot.body, env.world.client
+    links = {p.getJointInfo(body, j, physicsClientId=client)[12].decode(): j
+             for j in range(p.getNumJoints(body, physicsClientId=client))}
+    gripper = [links[name] for name in ("gripper_base_link", "finger_left_link", "finger_right_link")]
+
+    def forearm_gripper_distance(q):
+        env.robot.reset(np.asarray(q, dtype=float), ROBOT.max_opening_width)
+        return min(c[8] for g in gripper
+                   for c in p.getClosestPoints(body, body, 1.0, links["forearm_Link"], g, physicsClientId=client))
+
+    for q in SELF_CONTACTS:
+        assert forearm_gripper_distance(q) < 0.0, q
+    assert forearm_gripper_distance(ROBOT.home_joint_positions) > 0.05
+    env.close()
+
+
+@pytest.mark.parametrize("task", ["reach", "grasp"])
+def test_zone_never_stops_the_expert(task):
+    """No false alarm: along successful expert episodes every configuration is inside the zone
+    (the shipped policies were checked the same way over 40 episodes each, README)."""
+    from fr5_rl.envs import FR5Env
+    from fr5_rl.expert import ScriptedExpert
+
+    env = FR5Env(task=task)
+    expert = ScriptedExpert(env)
+    checked = 0
+    for seed in range(8):
+        obs, _ = env.reset(seed=3_000_000 + seed)
+        expert.reset()
+        done, problems = False, []
+        while not done:
+            obs, _, terminated, truncated, info = env.step(expert.act(obs))
+            done = terminated or truncated
+            problems.append(ZONE.check(env.joint_positions()))
+            checked += 1
+        if info["is_success"]:
+            assert not any(problems), (seed, [x for x in problems if x][:1])
+    env.close()
+    assert checked > 100
+
+
+def test_the_step_holds_a_command_into_the_table():
+    down = ROBOT.home_joint_positions + np.array([0, 1.2, 0, 0, 0, 0])
+    result = make_step(action=(0, 0, 0, 0, 0, 0, 1))(inputs(joints=joint_reading(positions=down)))
+    assert isinstance(result, Hold) and result.reason is HoldReason.UNSAFE_COMMAND and "table" in result.detail

@@ -49,6 +49,21 @@ class ForwardKinematics:
             rotation = rotation @ origin_rotation @ joint_rotation
         return position, rotation
 
+    def joint_origins(self, joint_positions: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """Origins of the joint frames j1 … j6 (rows, m, base_link; j6's is the flange) and the
+        flange rotation: the points the arm's links run between."""
+        rotation = np.eye(3)
+        position = np.zeros(3)
+        origins = []
+        for origin_rotation, origin_translation, angle in zip(
+            self._origin_rotations, self._origin_translations, joint_positions
+        ):
+            position = position + rotation @ origin_translation
+            origins.append(position)
+            c, s = np.cos(angle), np.sin(angle)
+            rotation = rotation @ origin_rotation @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        return np.array(origins), rotation
+
     def tcp_pose(self, joint_positions: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """Return (position (3,), rotation (3, 3)) of the ``tcp`` frame in base_link.
 

@@ -91,17 +91,103 @@ class StepInputs:
     stamp_now: float = 0.0
 
 
+def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> float:
+    """Shortest distance (m) between the segments p0-p1 and q0-q1."""
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a, e, f = float(d1 @ d1), float(d2 @ d2), float(d2 @ r)
+    if a < 1e-12 and e < 1e-12:
+        return float(np.linalg.norm(r))
+    if a < 1e-12:
+        s, t = 0.0, min(max(f / e, 0.0), 1.0)
+    else:
+        c = float(d1 @ r)
+        if e < 1e-12:
+            s, t = min(max(-c / a, 0.0), 1.0), 0.0
+        else:
+            b = float(d1 @ d2)
+            denominator = a * e - b * b
+            s = min(max((b * f - c * e) / denominator, 0.0), 1.0) if denominator > 1e-12 else 0.0
+            t = (b * s + f) / e
+            if t < 0.0:
+                s, t = min(max(-c / a, 0.0), 1.0), 0.0
+            elif t > 1.0:
+                s, t = min(max((b - c) / a, 0.0), 1.0), 1.0
+    return float(np.linalg.norm((p0 + d1 * s) - (q0 + d2 * t)))
+
+
+class SafetyZone:
+    """Where a commanded configuration would put the arm: above the table, links apart.
+
+    The links are capsules between the joint origins (forward kinematics shared with the
+    environments), plus the gripper body below the flange; the fingertips are the two outer
+    corners of the fully open fingers. A configuration is refused when a capsule dips below the
+    table top plus a margin, a fingertip would touch the table, or two links that are not
+    neighbours in the chain come closer than a margin. Settings: ``env.yaml`` ``safety_zone``.
+
+    :param robot: the robot's kinematics.
+    :param env_cfg: the environment configuration (``table`` and ``safety_zone``).
+    """
+
+    LINKS = ("upperarm", "forearm", "wrist1", "wrist2", "gripper")
+    # Pairs that are not neighbours in the chain (neighbours touch at their joint by design).
+    PAIRS = (("upperarm", "wrist1"), ("upperarm", "wrist2"), ("upperarm", "gripper"), ("forearm", "gripper"))
+
+    def __init__(self, robot: RobotSpec, env_cfg: Mapping[str, Any]) -> None:
+        zone = env_cfg["safety_zone"]
+        self.kinematics = ForwardKinematics(robot)
+        self.table_top = float(env_cfg["table"]["top_height"])
+        self.table_margin = float(zone["table_margin"])
+        self.fingertip_margin = float(zone["fingertip_margin"])
+        self.fingertip_reach = float(zone["fingertip_reach"])
+        self.finger_half_span = float(zone["finger_half_span"])
+        self.self_margin = float(zone["self_margin"])
+        self.radii = {name: float(zone["link_radii"][name]) for name in self.LINKS}
+        self.gripper_length = float(zone["gripper_length"])
+        self.tcp_offset = float(robot.tcp_offset)
+
+    def capsules(self, joint_positions: Sequence[float]) -> Mapping[str, Tuple[np.ndarray, np.ndarray]]:
+        """Each link's segment (two points, m, base_link) for joint angles (rad)."""
+        origins, flange_rotation = self.kinematics.joint_origins(np.asarray(joint_positions, dtype=np.float64))
+        approach, finger_axis = flange_rotation[:, 2], flange_rotation[:, 1]
+        tips = origins[5] + approach * (self.tcp_offset + self.fingertip_reach)
+        return {"upperarm": (origins[1], origins[2]), "forearm": (origins[2], origins[3]),
+                "wrist1": (origins[3], origins[4]), "wrist2": (origins[4], origins[5]),
+                "gripper": (origins[5], origins[5] + approach * self.gripper_length),
+                "fingertips": (tips - finger_axis * self.finger_half_span, tips + finger_axis * self.finger_half_span)}
+
+    def check(self, joint_positions: Sequence[float]) -> Optional[str]:
+        """None when the configuration (rad) is inside the zone, else what it would hit."""
+        capsules = self.capsules(joint_positions)
+        tip_height = min(point[2] for point in capsules["fingertips"]) - self.table_top
+        if tip_height < self.fingertip_margin:
+            return (f"a fingertip would be {tip_height * 1000:.0f} mm from the table "
+                    f"(margin {self.fingertip_margin * 1000:.0f} mm)")
+        for name in self.LINKS:
+            start, end = capsules[name]
+            clearance = min(start[2], end[2]) - self.radii[name] - self.table_top
+            if clearance < self.table_margin:
+                return f"the {name} link would come {clearance * 1000:.0f} mm from the table (margin {self.table_margin * 1000:.0f} mm)"
+        for first, second in self.PAIRS:
+            gap = segment_distance(*capsules[first], *capsules[second]) - self.radii[first] - self.radii[second]
+            if gap < self.self_margin:
+                return f"the {first} and {second} links would come {gap * 1000:.0f} mm apart (margin {self.self_margin * 1000:.0f} mm)"
+        return None
+
+
 class SafetyGate:
     """The last check before a command leaves: nothing that fails it is ever sent.
 
     A command passes when it has exactly one finite value per joint, lies inside the FR5
-    joint limits, and is within one control period's velocity limit of the measured position.
+    joint limits, is within one control period's velocity limit of the measured position, and,
+    when a :class:`SafetyZone` is given, keeps the arm above the table and its links apart.
 
     :param robot: the robot's limits.
     :param control_dt: control period (s).
+    :param zone: the safety zone the commanded configuration must stay in (None: not checked).
     """
 
-    def __init__(self, robot: RobotSpec, control_dt: float) -> None:
+    def __init__(self, robot: RobotSpec, control_dt: float, zone: Optional[SafetyZone] = None) -> None:
+        self.zone = zone
         self.lower = robot.lower_limits
         self.upper = robot.upper_limits
         self.step_limit = robot.velocity_limits * control_dt + 1e-9
@@ -122,7 +208,7 @@ class SafetyGate:
             joint = too_fast[0]
             return (f"joint j{joint + 1} would move {steps[joint]:.3f} rad in one period "
                     f"(limit {self.step_limit[joint]:.3f} rad)")
-        return None
+        return self.zone.check(targets) if self.zone is not None else None
 
 
 class DeploymentStep:
@@ -152,7 +238,7 @@ class DeploymentStep:
             raise ValueError(f"the policy takes {policy.observation_size} observation values; this fr5_rl "
                              f"builds {self.builder.size} for {policy.task}")
         self.shaper = JointCommandShaper(robot, env_cfg["action"], self.control_dt)
-        self.gate = SafetyGate(robot, self.control_dt)
+        self.gate = SafetyGate(robot, self.control_dt, SafetyZone(robot, env_cfg))
         self.object_rest_z = object_rest_z(env_cfg)
         self.joint_state_timeout = float(joint_state_timeout)
         self.target_timeout = float(target_timeout)
