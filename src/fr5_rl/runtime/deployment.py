@@ -119,10 +119,10 @@ class SafetyZone:
     """Where a commanded configuration would put the arm: above the table, links apart.
 
     The links are capsules between the joint origins (forward kinematics shared with the
-    environments), plus the gripper body below the flange; the fingertips are the two outer
-    corners of the fully open fingers. A configuration is refused when a capsule dips below the
-    table top plus a margin, a fingertip would touch the table, or two links that are not
-    neighbours in the chain come closer than a margin. Settings: ``env.yaml`` ``safety_zone``.
+    environments), plus the gripper body below the flange; the tcp (between the fingertips) is a
+    point. A configuration is refused when a capsule dips below the table top plus a margin,
+    the tcp goes below its minimum height, or two links that are not neighbours in the chain
+    come closer than a margin. Settings: ``env.yaml`` ``safety_zone``.
 
     :param robot: the robot's kinematics.
     :param env_cfg: the environment configuration (``table`` and ``safety_zone``).
@@ -137,9 +137,7 @@ class SafetyZone:
         self.kinematics = ForwardKinematics(robot)
         self.table_top = float(env_cfg["table"]["top_height"])
         self.table_margin = float(zone["table_margin"])
-        self.fingertip_margin = float(zone["fingertip_margin"])
-        self.fingertip_reach = float(zone["fingertip_reach"])
-        self.finger_half_span = float(zone["finger_half_span"])
+        self.tcp_min_height = float(zone["tcp_min_height"])
         self.self_margin = float(zone["self_margin"])
         self.radii = {name: float(zone["link_radii"][name]) for name in self.LINKS}
         self.gripper_length = float(zone["gripper_length"])
@@ -148,20 +146,19 @@ class SafetyZone:
     def capsules(self, joint_positions: Sequence[float]) -> Mapping[str, Tuple[np.ndarray, np.ndarray]]:
         """Each link's segment (two points, m, base_link) for joint angles (rad)."""
         origins, flange_rotation = self.kinematics.joint_origins(np.asarray(joint_positions, dtype=np.float64))
-        approach, finger_axis = flange_rotation[:, 2], flange_rotation[:, 1]
-        tips = origins[5] + approach * (self.tcp_offset + self.fingertip_reach)
+        approach = flange_rotation[:, 2]
         return {"upperarm": (origins[1], origins[2]), "forearm": (origins[2], origins[3]),
                 "wrist1": (origins[3], origins[4]), "wrist2": (origins[4], origins[5]),
                 "gripper": (origins[5], origins[5] + approach * self.gripper_length),
-                "fingertips": (tips - finger_axis * self.finger_half_span, tips + finger_axis * self.finger_half_span)}
+                "tcp": (origins[5] + approach * self.tcp_offset,) * 2}
 
     def check(self, joint_positions: Sequence[float]) -> Optional[str]:
         """None when the configuration (rad) is inside the zone, else what it would hit."""
         capsules = self.capsules(joint_positions)
-        tip_height = min(point[2] for point in capsules["fingertips"]) - self.table_top
-        if tip_height < self.fingertip_margin:
-            return (f"a fingertip would be {tip_height * 1000:.0f} mm from the table "
-                    f"(margin {self.fingertip_margin * 1000:.0f} mm)")
+        tcp_height = capsules["tcp"][0][2] - self.table_top
+        if tcp_height < self.tcp_min_height:
+            return (f"the tcp would be {tcp_height * 1000:.0f} mm above the table "
+                    f"(minimum {self.tcp_min_height * 1000:.0f} mm)")
         for name in self.LINKS:
             start, end = capsules[name]
             clearance = min(start[2], end[2]) - self.radii[name] - self.table_top
