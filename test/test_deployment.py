@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fr5_rl.config import load_env_config, load_robot_spec
+from fr5_rl.runtime.bundle import ModelFilesError
 from fr5_rl.runtime.deployment import Command, DeploymentStep, Hold, HoldReason, SafetyGate, StepInputs
 from fr5_rl.runtime.joint_state import ArmJointState, JointStateReader, Reading
 from fr5_rl.runtime.policy import Policy
@@ -131,7 +132,7 @@ def test_wrong_policy_size_is_refused():
     assert DeploymentStep(FixedPolicy([0] * 7, task="grasp"), ROBOT, ENV_CFG, 0.1, 0.5).builder.size == 24
     policy = FixedPolicy([0] * 7)
     policy.observation_size = 24
-    with pytest.raises(ValueError, match="observation values"):
+    with pytest.raises(ModelFilesError, match="observation values"):
         DeploymentStep(policy, ROBOT, ENV_CFG, 0.1, 0.5)
 
 

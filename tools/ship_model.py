@@ -22,9 +22,8 @@ from benchlib import REPO
 
 from fr5_rl.runtime.bundle import META_FILE, MODEL_FILE, STATS_FILE, ModelFilesError, read_meta, write_json_atomic
 from fr5_rl.training.evaluation import plot_learning_curve
-from fr5_rl.training.onnx_export import export, parity
+from fr5_rl.training.onnx_export import PARITY_TOLERANCE, export, parity
 
-PARITY_TOLERANCE = 1e-5  # max |delta action| between ONNX and SB3, as export_onnx.py checks
 PARITY_OBSERVATIONS = 1000
 # summary.json key -> meta.json key (what evaluate.py copies into eval.json)
 FROM_SUMMARY = {"wall_time_s": "training_wall_time_s", "time_to_solve_s": "time_to_solve_s",

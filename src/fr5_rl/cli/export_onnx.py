@@ -13,9 +13,6 @@ from ..config import ConfigError
 from ..runtime.bundle import ModelFilesError
 from . import fail, script_args
 
-PARITY_TOLERANCE = 1e-5  # max |delta action| between ONNX and SB3
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="export_onnx.py", description=__doc__.split("\n\n")[0].strip("`"),
                                      epilog=__doc__.split("\n\n", 1)[1])
@@ -26,7 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[List[str]] = None) -> int:
     args = build_parser().parse_args(script_args(argv))
-    from ..training.onnx_export import export, parity
+    from ..training.onnx_export import PARITY_TOLERANCE, export, parity
 
     try:
         path = export(args.model_dir)

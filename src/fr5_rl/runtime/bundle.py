@@ -170,10 +170,9 @@ def check_files_present(directory: Path, backend: str) -> None:
     if not directory.is_dir():
         raise ModelFilesError(f"{directory}: no such model directory; pass the directory that holds {META_FILE}")
     for name in required_files(backend):
-        if (directory / name).is_file():
-            continue
+        if name == META_FILE or (directory / name).is_file():
+            continue  # meta.json: read_meta says what is wrong with it
         remedy = {
-            META_FILE: "copy the complete model directory, or re-run the training that made it",
             ONNX_FILE: f"run `rosrun fr5_rl export_onnx.py {directory}`, or use --backend torch",
             MODEL_FILE: "copy the complete model directory, or use --backend onnx if it has model.onnx",
             STATS_FILE: "the normalisation statistics must be saved with the model (train.py does this); "

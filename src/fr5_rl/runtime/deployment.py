@@ -22,6 +22,7 @@ from ..config import RobotSpec, object_rest_z
 from ..control import JointCommandShaper
 from ..kinematics import ForwardKinematics
 from ..observation import ObservationBuilder, ObservationInputs
+from .bundle import ModelFilesError
 from .joint_state import ArmJointState, Reading
 from .policy import Policy
 
@@ -232,8 +233,8 @@ class DeploymentStep:
         self.kinematics = ForwardKinematics(robot)
         self.builder = ObservationBuilder(robot, env_cfg["observation"], policy.task == "grasp")
         if self.builder.size != policy.observation_size:
-            raise ValueError(f"the policy takes {policy.observation_size} observation values; this fr5_rl "
-                             f"builds {self.builder.size} for {policy.task}")
+            raise ModelFilesError(f"the policy takes {policy.observation_size} observation values; this fr5_rl "
+                                  f"builds {self.builder.size} for {policy.task}: retrain it")
         self.shaper = JointCommandShaper(robot, env_cfg["action"], self.control_dt)
         self.gate = SafetyGate(robot, self.control_dt, SafetyZone(robot, env_cfg))
         self.object_rest_z = object_rest_z(env_cfg)

@@ -88,6 +88,9 @@ def rollout_observations(task: str, env_overrides, policy, count: int, seed: int
     return np.stack(observations)
 
 
+PARITY_TOLERANCE = 1e-5  # max |delta action| between the ONNX graph and the SB3 model
+
+
 def parity(model_dir: Path, count: int = 1000) -> float:
     """max |action_onnx - action_sb3| over ``count`` rollout observations."""
     from ..runtime.policy import load_policy
