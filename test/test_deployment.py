@@ -328,3 +328,29 @@ def test_the_step_holds_a_command_into_the_table():
     down = ROBOT.home_joint_positions + np.array([0, 1.2, 0, 0, 0, 0])
     result = make_step(action=(0, 0, 0, 0, 0, 0, 1))(inputs(joints=joint_reading(positions=down)))
     assert isinstance(result, Hold) and result.reason is HoldReason.UNSAFE_COMMAND and "table" in result.detail
+
+
+def test_start_episode_forgets_the_filter_and_opens_the_gripper():
+    """After ``start_episode`` the step acts as a fresh one: the first period of a new episode
+    (the lockstep simulator's reset, an operator's new object) matches training's first step."""
+    fresh = make_step(action=(1, -1, 0.5, 0, 0, 0, -1))(inputs())
+    step = make_step(action=(1, -1, 0.5, 0, 0, 0, -1))
+    step(inputs())
+    step(inputs())
+    assert step.gripper_command_width < ROBOT.max_opening_width  # action -1: closing
+    step.start_episode()
+    assert step.gripper_command_width == pytest.approx(ROBOT.max_opening_width)
+    again = step(inputs())
+    assert np.allclose(again.arm_positions, fresh.arm_positions)
+    assert np.allclose(step.policy.seen[-1], step.policy.seen[0])  # the same first observation
+
+
+def test_reading_carries_the_oldest_arm_stamp():
+    reader = JointStateReader(ROBOT.joint_names, ROBOT.finger_joint_names)
+    reader.update(list(ROBOT.joint_names[:3]), [0.0] * 3, [], 5.0, NOW)
+    reader.update(list(ROBOT.joint_names[3:]), [0.0] * 3, [], 5.02, NOW)
+    assert reader.reading().stamp == pytest.approx(5.0)
+    reader.update(list(ROBOT.joint_names[:3]), [0.0] * 3, [], 5.04, NOW)
+    assert reader.reading().stamp == pytest.approx(5.02)
+    reader.update(list(ROBOT.joint_names), [0.0] * 6, [], 0.0, NOW)  # a driver without stamps
+    assert reader.reading().stamp == 0.0

@@ -201,6 +201,38 @@ def test_judge_period_gives_the_verdicts_step_gives(actor):
 
 
 # ----------------------------------------------------------------------------- object and scene
+def test_advance_period_reproduces_step_exactly():
+    """Lockstep's contract: step()'s arm targets and widths, replayed through advance_period +
+    judge_period in a second env, give bit-identical joint states and the same verdicts, period
+    by period; grasp, with the gripper closing and the object lifted."""
+    stepped, replayed = FR5Env(task="grasp"), FR5Env(task="grasp")
+    try:
+        seed = 3
+        obs, _ = stepped.reset(seed=seed)
+        commands = record_arm_commands(stepped)
+        expert = ScriptedExpert(stepped)
+        expert.reset()
+        states, verdicts = [], []
+        while True:
+            obs, _, terminated, truncated, info = stepped.step(expert.act(obs))
+            states.append(stepped.joint_states())
+            verdicts.append((info["is_success"], info["failure"], terminated, truncated))
+            if terminated or truncated:
+                break
+        assert verdicts[-1][0], "the expert should lift the object"
+        assert min(width for _, width in commands) < 0.05  # the gripper did close
+
+        replayed.reset(seed=seed)
+        for (targets, width), state, expected in zip(commands, states, verdicts):
+            replayed.advance_period(targets, width)
+            verdict = replayed.judge_period()
+            assert replayed.joint_states() == state
+            assert (verdict.success, verdict.failure, verdict.terminated, verdict.truncated) == expected
+    finally:
+        stepped.close()
+        replayed.close()
+
+
 def test_object_pose_is_the_simulators():
     env = FR5Env(task="grasp")
     try:
@@ -334,3 +366,52 @@ def test_simulator_node_uses_only_the_env_public_api(tmp_path):
     probe = tmp_path / "probe.py"
     probe.write_text("env.world.client\nself.env.task.judge\nself.env.scene()\nenv._steps\n")
     assert env_internals_used(probe) == ["1: env.world", "2: self.env.task", "4: env._steps"]
+
+
+def timing_env(delay, age):
+    """Reach at 5 ms physics steps (4 per period) with fixed real-time timing, nothing else random."""
+    return FR5Env(task="reach", config={"reach": {"simulation": {"physics_dt": 0.005}}, "randomisation": {
+        "enabled": True, "object_size_scale": [1, 1], "object_mass_scale": [1, 1], "friction_scale": [1, 1],
+        "joint_damping": [0, 0], "command_delay_s": [delay, delay], "observation_age_s": [age, age]}})
+
+
+def test_command_delay_keeps_the_previous_command_standing():
+    """With a 10 ms delay the first two of four physics steps track the previous period's
+    targets (at the first step: the reset pose), then the new ones."""
+    env = timing_env(0.01, 0.0)
+    try:
+        env.reset(seed=1)
+        start = list(env.joint_positions())
+        commands = record_arm_commands(env)
+        action = np.array([0.5, -0.5, 0.5, 0, 0, 0, 1], dtype=np.float32)
+        env.step(action)
+        env.step(action)
+        assert len(commands) == 4  # two per period: the standing command, then the new one
+        np.testing.assert_allclose(commands[0][0], start)
+        assert not np.allclose(commands[1][0], start)
+        np.testing.assert_allclose(commands[2][0], commands[1][0])  # period 1's command stands into period 2
+    finally:
+        env.close()
+
+
+def test_observation_age_observes_an_earlier_joint_state():
+    """A 10 ms observation age: the observation (and the shaper's base) is the robot measured
+    two physics steps before the period ends, not the state at its end."""
+    aged, fresh = timing_env(0.0, 0.01), timing_env(0.0, 0.0)
+    try:
+        action = np.array([0.8, -0.8, 0.8, 0, 0, 0, 1], dtype=np.float32)
+        for env in (aged, fresh):
+            env.reset(seed=2)
+        measured = []
+        original = aged.robot.measure
+        aged.robot.measure = lambda: measured.append(original()) or measured[-1]
+        obs_aged = aged.step(action)[0]
+        obs_fresh = fresh.step(action)[0]
+        np.testing.assert_array_equal(aged.joint_positions(), fresh.joint_positions())  # same physics
+        early = measured[0][0]  # the first measurement of the step: taken two steps early
+        assert not np.allclose(early, aged.joint_positions())
+        np.testing.assert_allclose(aged._observed_joint_positions, early)
+        assert not np.allclose(obs_aged[:6], obs_fresh[:6])
+    finally:
+        aged.close()
+        fresh.close()

@@ -323,8 +323,11 @@ class PolicyNodeParams:
     gripper_command_topic: str
     command_gripper: bool
     enabled: bool
+    sim_time_input_wait: float
 
     def check(self, source: str) -> None:
+        if self.sim_time_input_wait < 0:
+            raise ConfigError(f"{source}: 'sim_time_input_wait' must be >= 0 s, got {self.sim_time_input_wait}")
         if self.backend not in ("torch", "onnx"):
             raise ConfigError(f"{source}: 'backend' must be torch or onnx, got {self.backend!r}")
         _positive(source, rate=self.rate, joint_state_timeout=self.joint_state_timeout,
@@ -350,8 +353,19 @@ class SimNodeParams:
     command_topic: str
     gripper_command_topic: str
     target_topic: str
+    publish_finger_joints: bool
+    servo_rate: float
+    servo_delay_cycles: int
+    lockstep: bool
+    lockstep_command_timeout: float
+    lockstep_gripper: bool
+    policy_reset_service: str
+    outcome_log: str
 
     def check(self, source: str) -> None:
+        if self.servo_rate < 0 or self.servo_delay_cycles < 0:
+            raise ConfigError(f"{source}: servo_rate and servo_delay_cycles must be >= 0 (0: no servo cycle)")
+        _positive(source, lockstep_command_timeout=self.lockstep_command_timeout)
         if self.task not in ("reach", "grasp"):
             raise ConfigError(f"{source}: 'task' must be reach or grasp, got {self.task!r}")
         _positive(source, publish_rate=self.publish_rate, physics_dt=self.physics_dt, camera_rate=self.camera_rate,

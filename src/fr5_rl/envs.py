@@ -171,6 +171,11 @@ class FR5Env(gym.Env):
         self._action_queue: deque = deque()
         self._latency_steps = 0
         self._obs_noise_std = 0.0
+        # Real-time timing within a period (randomisation.command_delay_s, observation_age_s):
+        # ranges (s) drawn every step, and the command standing until a delayed one takes over.
+        self._command_delay_range = (0.0, 0.0)
+        self._observation_age_range = (0.0, 0.0)
+        self._standing_command: Tuple[Sequence[float], float] = ((), 0.0)
         self._steps = 0
         self._state: Optional[TaskState] = None  # the last one observed
         self._workspace = (tuple(self.cfg["workspace"]["low"]), tuple(self.cfg["workspace"]["high"]))
@@ -195,6 +200,7 @@ class FR5Env(gym.Env):
         self.shaper.reset()
         self.task.reset()
         self._action_queue.clear()
+        self._standing_command = (tuple(start), self._gripper_command_width)
         self._steps = 0
         state, obs = self._observe()
         self.task.prime(state)
@@ -206,15 +212,13 @@ class FR5Env(gym.Env):
         values = finite_values(action, ACTION_SIZE, "the action")
         values = [1.0 if value > 1.0 else (-1.0 if value < -1.0 else value) for value in values]
         applied = self._delayed(values)
-        # The joint state measured by the last observation is still current: nothing moved since.
-        # Both lists hold finite floats (the observation refuses anything else), so the shaper's
-        # checks are not repeated.
-        targets = self.shaper.targets_from_floats(applied, self._state.joint_positions)
-        self._gripper_command_width = self.shaper.gripper_width(applied)
-        self.robot.command(targets, self._gripper_command_width)
-        self.world.step()
+        # Targets are offsets from the joint state the last observation saw (as on the robot,
+        # where that is the newest /joint_states message, however old). Both lists hold finite
+        # floats (the observation refuses anything else), so the shaper's checks are not repeated.
+        targets = self.shaper.targets_from_floats(applied, self._observed_joint_positions)
+        measured_early = self._run_period(targets, self.shaper.gripper_width(applied))
 
-        state, obs = self._observe()
+        state, obs = self._observe(measured_early)
         success, failure, terminated, truncated, _, outcome = self.judge_period(state)
         parts = self.task.reward(outcome, values)
         info: Dict[str, Any] = {"is_success": success, "failure": failure}
@@ -315,6 +319,21 @@ class FR5Env(gym.Env):
         self.robot.command(arm_targets, gripper_width, period=self.world.physics_dt)
         self.world.step_physics()
 
+    def advance_period(self, arm_targets: Sequence[float], gripper_width: float) -> None:
+        """Advance the simulation by one control period (:attr:`control_dt` seconds) with one
+        command standing throughout: what :meth:`step` does after shaping its action. A
+        lockstep driver calls this, then :meth:`judge_period`, to reproduce :meth:`step`
+        exactly from joint targets computed elsewhere (the ROS policy node).
+
+        :param arm_targets: (6,) joint position targets (rad), controller order j1 .. j6, inside
+            the joint limits.
+        :param gripper_width: wanted opening width (m); the fingers ramp toward it at the
+            gripper's rated speed.
+        """
+        self._gripper_command_width = float(gripper_width)
+        self.robot.command(arm_targets, self._gripper_command_width)
+        self.world.step()
+
     def judge_period(self, state: Optional[TaskState] = None) -> EpisodeVerdict:
         """Count and judge one control period of the episode: the task's success and failure
         tests, and the step limit (``"timeout"``). :meth:`step` calls it once per step; a
@@ -337,6 +356,43 @@ class FR5Env(gym.Env):
         return EpisodeVerdict(success, "timeout" if truncated else failure, terminated, truncated, steps, outcome)
 
     # ------------------------------------------------------------------ internals
+    def _run_period(self, arm_targets: Sequence[float], gripper_width: float) -> Optional[tuple]:
+        """One control period of :meth:`step`, with the real-time loop's timing if randomised:
+        the previous command stands for the first ``command_delay`` of the period (a driver's
+        servo cycle, a late command), and the observation is measured ``observation_age``
+        before the period ends (a joint state published at a lower rate than the loop runs).
+
+        :return: the robot's measurement (:meth:`FR5Robot.measure`) taken early, or None when
+            the observation is measured at the end of the period.
+        """
+        substeps, physics_dt = self.world.substeps, self.world.physics_dt
+        delay = self._draw_substeps(self._command_delay_range, substeps - 1)
+        age = self._draw_substeps(self._observation_age_range, substeps - 1)
+        if delay == 0 and age == 0:
+            self.advance_period(arm_targets, gripper_width)
+            self._standing_command = (arm_targets, gripper_width)
+            return None
+        measured = None
+        if delay:
+            self.robot.command(*self._standing_command, period=delay * physics_dt)
+        for substep in range(substeps):
+            if substep == delay:
+                self.robot.command(arm_targets, gripper_width, period=(substeps - delay) * physics_dt)
+            if substep == substeps - age:
+                measured = self.robot.measure()
+            self.world.step_physics()
+        self._gripper_command_width = float(gripper_width)
+        self._standing_command = (arm_targets, gripper_width)
+        return measured
+
+    def _draw_substeps(self, seconds_range: Tuple[float, float], most: int) -> int:
+        """A duration drawn uniformly from ``seconds_range``, in whole physics steps."""
+        low, high = seconds_range
+        if high <= 0.0:
+            return 0
+        seconds = float(self.np_random.uniform(low, high))
+        return min(int(round(seconds / self.world.physics_dt)), most)
+
     def _delayed(self, action: List[float]) -> List[float]:
         """Apply the configured action latency (whole control steps; 0 = none)."""
         if self._latency_steps == 0:
@@ -377,10 +433,17 @@ class FR5Env(gym.Env):
             tcp_in_workspace=x_low <= x <= x_high and y_low <= y <= y_high and z_low <= z <= z_high,
         )
 
-    def _observe(self) -> Tuple[TaskState, np.ndarray]:
+    def _observe(self, measured_early: Optional[tuple] = None) -> Tuple[TaskState, np.ndarray]:
+        """The task state now, and the observation: of the state now, or of the robot as
+        ``measured_early`` (an older joint state; the object is seen now)."""
         self._state = state = self.task_state()
         q, tcp_position, tcp_axis, object_position = (
             state.joint_positions, state.tcp_position, state.tcp_approach_axis, state.object_position)
+        velocities, width = state.joint_velocities, state.gripper_width
+        if measured_early is not None:
+            q, velocities, width, tcp_position, tcp_quaternion = measured_early
+            tcp_axis = quaternion_z_axis(tcp_quaternion)
+        self._observed_joint_positions = q
         if self._obs_noise_std > 0.0:
             rng = self.np_random
             q = np.asarray(q) + rng.normal(0.0, self._obs_noise_std, 6)
@@ -389,7 +452,7 @@ class FR5Env(gym.Env):
             tcp_position, tcp_rotation = self.kinematics.tcp_pose(q)
             tcp_axis = tcp_rotation[:, 2]
         obs = self.observation_builder.build_from(
-            q, state.joint_velocities, state.gripper_width, self._gripper_command_width, tcp_position, tcp_axis,
+            q, velocities, width, self._gripper_command_width, tcp_position, tcp_axis,
             object_position, object_position[2] - self._object_rest_z,
         )
         return state, obs
@@ -423,3 +486,5 @@ class FR5Env(gym.Env):
         lo, hi = (int(v) for v in rnd["action_latency_steps"])
         self._latency_steps = int(rng.integers(lo, hi + 1)) if on else 0
         self._obs_noise_std = float(rnd["observation_noise_std"]) if on else 0.0
+        self._command_delay_range = tuple(float(v) for v in rnd["command_delay_s"]) if on else (0.0, 0.0)
+        self._observation_age_range = tuple(float(v) for v in rnd["observation_age_s"]) if on else (0.0, 0.0)

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """rostest node: counts the simulator's episode outcomes and checks the success rate.
 
-Params: ~episodes (how many to watch), ~min_success_rate. Every command seen on the way must
-be a valid FR5 command (6 finite values inside the joint limits).
+Params: ~episodes (how many to watch), ~min_success_rate, ~command_topic, and optionally
+~joint_states_topic with ~joint_names (the exact set of names every message must carry). Every
+command seen on the way must be a valid FR5 command (6 finite values inside the joint limits).
 """
 import json
 import unittest
@@ -10,6 +11,7 @@ import unittest
 import numpy as np
 import rospy
 import rostest
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
 from fr5_rl.config import load_robot_spec
@@ -33,7 +35,13 @@ class TestClosedLoop(unittest.TestCase):
                 bad_commands.append(list(message.data))
 
         rospy.Subscriber("/fr5_sim/episode_outcome", String, on_outcome, queue_size=50)
-        rospy.Subscriber("/fr5/arm_controller/command", Float64MultiArray, on_command, queue_size=50)
+        command_topic = rospy.get_param("~command_topic", "/fr5/arm_controller/command")
+        rospy.Subscriber(command_topic, Float64MultiArray, on_command, queue_size=50)
+        expected_names = set(rospy.get_param("~joint_names", []))
+        names_seen = set()
+        if expected_names:
+            rospy.Subscriber(rospy.get_param("~joint_states_topic"), JointState,
+                             lambda m: names_seen.add(tuple(sorted(m.name))), queue_size=50)
         deadline = rospy.get_time() + 220.0
         while len(outcomes) < episodes and rospy.get_time() < deadline and not rospy.is_shutdown():
             rospy.sleep(0.2)
@@ -43,6 +51,8 @@ class TestClosedLoop(unittest.TestCase):
         rospy.loginfo(f"closed loop: {successes}/{episodes} successes: {watched}")
         self.assertGreater(commands[0], 0, "the policy node never commanded the arm")
         self.assertEqual(bad_commands, [], "invalid commands were published")
+        if expected_names:
+            self.assertEqual(names_seen, {tuple(sorted(expected_names))}, "joint_states carried other joints")
         self.assertGreaterEqual(successes / episodes, min_rate,
                                 f"success {successes}/{episodes} below {min_rate:.0%}: {watched}")
 

@@ -11,12 +11,17 @@ gate: the same code the environments use), then publishes what comes back:
 - a :class:`~fr5_rl.runtime.deployment.Hold`: nothing, so the controller keeps its last
   target, and a warning (at once when the reason changes, then throttled).
 
-``~enable`` (std_srvs/SetBool) pauses and resumes. Per-cycle timing goes to ``~timing``
+``~enable`` (std_srvs/SetBool) pauses and resumes; ``~reset`` (std_srvs/Trigger) starts as an
+episode starts (no action-filter momentum, gripper commanded open), for a new object after the
+arm was homed. On simulated time (``/use_sim_time``, a lockstep simulator) each period first
+waits, up to ``~sim_time_input_wait`` wall seconds, for the joint state and target stamped at the
+period's start, so the outcome does not depend on which topic arrived first. Per-cycle timing goes to ``~timing``
 (Float64MultiArray: loop period, inference time, compute latency, joint-state age, all
 seconds) and a summary to ``/diagnostics`` at 1 Hz. Parameters: ``config/policy_node.yaml``.
 """
 from __future__ import annotations
 
+import threading
 import time
 from collections import deque
 from pathlib import Path
@@ -28,9 +33,10 @@ import tf2_geometry_msgs  # noqa: F401  (registers PoseStamped with tf2)
 import tf2_ros
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
-from std_srvs.srv import SetBool, SetBoolResponse
+from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 from visualization_msgs.msg import Marker
 
 from ..config import ConfigError, PolicyNodeParams, load_env_config, load_robot_spec, package_root
@@ -69,6 +75,10 @@ class PolicyNode:
         self.target_received = 0.0
         self.last_tick: Optional[float] = None
         self.timing: deque = deque(maxlen=500)
+        # Guards self.step (timer vs. services) and signals new inputs to a waiting period.
+        self.inputs_changed = threading.Condition()
+        self.sim_time = bool(rospy.get_param("/use_sim_time", False))
+        self.last_input_stamp = -1.0  # sim time: stamp of the joint state the last step used
 
         self.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
@@ -80,7 +90,15 @@ class PolicyNode:
         rospy.Subscriber(params.joint_states_topic, JointState, self.on_joint_state, queue_size=1, tcp_nodelay=True)
         rospy.Subscriber(params.target_topic, PoseStamped, self.on_target, queue_size=1, tcp_nodelay=True)
         rospy.Service("~enable", SetBool, self.on_enable)
-        self.timer = rospy.Timer(rospy.Duration(self.control_dt), self.on_timer)
+        rospy.Service("~reset", Trigger, self.on_reset)
+        if self.sim_time:
+            # On simulated time the period starts when /clock crosses it. rospy.Timer's sim-time
+            # sleep can miss a /clock wake-up and oversleep by 0.5 s, which a lockstep simulator
+            # would take for a held period; stepping from the clock's own callback cannot.
+            self.next_period: Optional[rospy.Time] = None
+            rospy.Subscriber("/clock", Clock, self.on_clock, queue_size=1, tcp_nodelay=True)
+        else:
+            self.timer = rospy.Timer(rospy.Duration(self.control_dt), lambda event: self.control_period(event.current_real))
         self.diagnostics_timer = rospy.Timer(rospy.Duration(1.0), self.publish_diagnostics)
         rospy.loginfo(f"policy_node: {policy.task} model {model_dir} ({policy.backend}), {params.rate:g} Hz, "
                       f"gripper commands {'on' if params.command_gripper else 'off'}")
@@ -90,13 +108,45 @@ class PolicyNode:
         if self.reader.update(message.name, message.position, message.velocity, message.header.stamp.to_sec(),
                               time.monotonic()) is None:
             self.joint_state_stamp = message.header.stamp
+        if self.sim_time:
+            with self.inputs_changed:
+                self.inputs_changed.notify_all()
 
     def on_target(self, message: PoseStamped) -> None:
         self.target, self.target_received = message, time.monotonic()
+        if self.sim_time:
+            with self.inputs_changed:
+                self.inputs_changed.notify_all()
 
     def on_enable(self, request) -> SetBoolResponse:
-        self.step.enabled = bool(request.data)
+        with self.inputs_changed:
+            self.step.enabled = bool(request.data)
         return SetBoolResponse(success=True, message="enabled" if self.step.enabled else "disabled")
+
+    def on_reset(self, _request) -> TriggerResponse:
+        with self.inputs_changed:
+            self.step.start_episode()
+        return TriggerResponse(success=True, message="starting as a new episode")
+
+    def wait_for_inputs_of(self, period_start: rospy.Time) -> None:
+        """On simulated time: wait (bounded, wall clock) until the joint state and the target
+        stamped at ``period_start`` have both arrived; they travel on separate connections."""
+        wanted = period_start.to_sec() - 1e-6
+        deadline = time.monotonic() + self.params.sim_time_input_wait
+
+        def arrived() -> bool:
+            reading, target = self.reader.reading(), self.target
+            return (reading is not None and reading.stamp >= wanted
+                    and target is not None and target.header.stamp.to_sec() >= wanted)
+
+        with self.inputs_changed:
+            while not arrived() and not rospy.is_shutdown():
+                left = deadline - time.monotonic()
+                if left <= 0.0:
+                    rospy.logwarn_throttle(2.0, f"policy_node: inputs stamped {period_start.to_sec():.3f} s did not "
+                                                f"arrive within ~sim_time_input_wait ({self.params.sim_time_input_wait:g} s)")
+                    return
+                self.inputs_changed.wait(left)
 
     def target_in_base(self) -> Optional[Reading]:
         """The newest target transformed into the base frame, or the tf problem."""
@@ -111,15 +161,31 @@ class PolicyNode:
         return Reading((position.x, position.y, position.z), received, stamp=message.header.stamp.to_sec())
 
     # ------------------------------------------------------------------ the 50 Hz loop
-    def on_timer(self, event) -> None:
+    def on_clock(self, message: Clock) -> None:
+        if self.next_period is None or message.clock >= self.next_period:
+            self.next_period = message.clock + rospy.Duration(self.control_dt)
+            self.control_period(message.clock)
+
+    def control_period(self, period_start: rospy.Time) -> None:
+        """One control period starting at ``period_start`` (ROS time): step, then publish."""
         if rospy.is_shutdown():
             return
         start = time.perf_counter()
         period = start - self.last_tick if self.last_tick is not None else self.control_dt
         self.last_tick = start
-        previous_hold = self.step.last_hold
-        result = self.step(StepInputs(time.monotonic(), self.reader.reading(), self.target_in_base(),
-                                        rospy.Time.now().to_sec()))
+        if self.sim_time and self.params.sim_time_input_wait > 0.0:
+            self.wait_for_inputs_of(period_start)
+        with self.inputs_changed:
+            joint_state = self.reader.reading()
+            if self.sim_time and joint_state is not None:
+                # A tick that waited past its period already used the next period's inputs;
+                # the next tick must not command that period a second time.
+                if joint_state.stamp > 0.0 and joint_state.stamp == self.last_input_stamp:
+                    return
+                self.last_input_stamp = joint_state.stamp
+            previous_hold = self.step.last_hold
+            result = self.step(StepInputs(time.monotonic(), joint_state, self.target_in_base(),
+                                            rospy.Time.now().to_sec()))
         if isinstance(result, Hold):
             self.report_hold(result, previous_hold)
             return

@@ -1,24 +1,36 @@
-"""Simulator node: the PyBullet FR5 world in real time, standing in for the arm's driver.
+"""Simulator node: the PyBullet FR5 world behind ROS topics, standing in for the arm's driver.
 
 It behaves like the FAIRINO ROS driver + gripper + a camera, so the policy node runs unchanged
 against it:
 
-- publishes ``/joint_states`` (j1..j6 and both finger joints, stamped) at ``~publish_rate``;
-- obeys ``/fr5/arm_controller/command`` (std_msgs/Float64MultiArray, 6 positions in rad, in
-  controller order j1..j6 — ros_control's JointGroupPositionController contract: a message of
-  the wrong length is dropped with a throttled error) and ``/fr5/gripper/command``
-  (std_msgs/Float64, opening width in m);
-- acts as the camera: the object's pose on ``/target_pose`` (geometry_msgs/PoseStamped) in
-  ``camera_link``, computed with config/static_transforms.yaml and optional noise;
+- publishes ``~joint_states_topic`` (sensor_msgs/JointState: j1..j6, and both finger joints
+  unless ``~publish_finger_joints`` is false, stamped) at ``~publish_rate``;
+- obeys ``~command_topic`` (std_msgs/Float64MultiArray, 6 positions in rad, in controller order
+  j1..j6 — ros_control's JointGroupPositionController contract: a message of the wrong length is
+  dropped with a throttled error) through the driver's servo cycle (``~servo_rate``,
+  ``~servo_delay_cycles``), and ``~gripper_command_topic`` (std_msgs/Float64, opening width in m);
+- acts as the camera: the object's pose on ``~target_topic`` (geometry_msgs/PoseStamped) in
+  ``~camera_frame``, computed with config/static_transforms.yaml and optional noise;
 - publishes rviz markers (table, object, tcp path) on ``~markers``;
 - judges each episode with the environment's own success test, publishes the outcome (JSON in
-  std_msgs/String) on ``~episode_outcome``, then places a new object and homes the arm;
-  ``~reset`` (std_srvs/Trigger) does that at once. With ``~episodes`` = N > 0 it stops after N
-  episodes and prints ``success rate: K/N`` as its last line.
+  std_msgs/String) on ``~episode_outcome`` (and appends it to ``~outcome_log``), calls the policy
+  node's ``~policy_reset_service``, then places a new object and homes the arm; ``~reset``
+  (std_srvs/Trigger) does that at once. With ``~episodes`` = N > 0 it stops after N episodes and
+  prints ``success rate: K/N`` as its last line.
+
+Two ways to pace the world:
+
+- **real time** (default): physics is locked to the wall clock, as a real arm is, at the
+  stand-in's own physics step (``~physics_dt``, ``~solver_iterations``).
+- **lockstep** (``~lockstep``): the node publishes ``/clock`` and advances one control period
+  only once that period's command has arrived (or ``~lockstep_command_timeout`` wall seconds
+  passed: the policy held). Every node runs on ``/use_sim_time``. The world then is the gym
+  environment's own (the task's physics step), advanced period by period as
+  :meth:`~fr5_rl.envs.FR5Env.step` does, so the deployed node's outcome equals gym's episode by
+  episode, faster than real time.
 
 The node is input and output only: the simulation, the episode verdict and the scene all come
-from :class:`fr5_rl.envs.FR5Env`'s public API (``advance_physics``, ``judge_period``,
-``joint_states``, ``object_pose``, ``scene``).
+from :class:`fr5_rl.envs.FR5Env`'s public API.
 """
 from __future__ import annotations
 
@@ -26,146 +38,273 @@ import json
 import threading
 import time
 from collections import deque
-from typing import Iterable, List, Sequence, Tuple
+from pathlib import Path
+from typing import Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 import rospy
 from geometry_msgs.msg import Point, PoseStamped
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import Trigger, TriggerResponse
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..config import ConfigError, SimNodeParams
+from ..config import ConfigError, SimNodeParams, package_root
 from ..envs import EpisodeVerdict, FR5Env, JointStates, Pose, SceneDescription
+from ..sim.servo import ServoCycle
 from ..transforms import load_static_transforms, matrix_from_quaternion, quaternion_from_matrix, transform_in
 from .params import exit_if_help_asked, node_parameters
 
 
+def whole_multiple(period: float, step: float) -> Optional[int]:
+    """``period / step`` when it is a whole number >= 1, else None."""
+    ratio = period / step
+    return int(round(ratio)) if ratio >= 1.0 - 1e-6 and abs(ratio - round(ratio)) <= 1e-6 else None
+
+
 class SimulatorNode:
-    """Runs one FR5Env world in wall-clock real time behind ROS topics.
+    """Runs one FR5Env world behind ROS topics, in real time or in lockstep with the policy.
 
     The subscriber and service callbacks run on rospy's threads; everything they share with
-    the loop (targets, the episode state) is guarded by ``self.lock``.
+    the loop (commands, the episode state) is guarded by ``self.lock``.
     """
 
     def __init__(self) -> None:
         # ---- parameters (config/sim_node.yaml)
         self.params = params = node_parameters(SimNodeParams, "sim_node")
         task = params.task
-        # The stand-in arm runs at its own physics step (finer than reach training uses), one
-        # physics step per /joint_states message, so simulated time keeps pace with the clock.
-        self.env = FR5Env(task=task, config={task: {"simulation": {"physics_dt": params.physics_dt,
-                                                                      "solver_iterations": params.solver_iterations}}})
+        if params.lockstep:
+            if params.servo_rate > 0:
+                raise ConfigError("sim_node: lockstep advances whole control periods as gym does; it cannot also "
+                                  "model a servo cycle: set ~servo_rate 0 (driver:=default) or ~lockstep false")
+            self.env = FR5Env(task=task)  # the gym world, as `evaluate.py` builds it
+        else:
+            # The stand-in arm runs at its own physics step, finer than reach training uses.
+            self.env = FR5Env(task=task, config={task: {"simulation": {
+                "physics_dt": params.physics_dt, "solver_iterations": params.solver_iterations}}})
         self.spec = self.env.robot_spec
         self.physics_dt = self.env.physics_dt
-        self.tick_dt = 1.0 / params.publish_rate
-        ratio = self.tick_dt / self.physics_dt
-        if ratio < 1.0 - 1e-6 or abs(ratio - round(ratio)) > 1e-6:
-            raise ConfigError(f"sim_node: 1 / publish_rate ({self.tick_dt:g} s) must be a whole multiple of "
-                              f"physics_dt ({self.physics_dt:g} s), or simulated time would drift from the clock")
-        self.substeps_per_tick = int(round(ratio))
+        # Lockstep publishes once per control period instead.
+        self.steps_per_publish = whole_multiple(1.0 / params.publish_rate, self.physics_dt) or 0
+        if not params.lockstep and not self.steps_per_publish:
+            raise ConfigError(f"sim_node: 1 / publish_rate ({1.0 / params.publish_rate:g} s) must be a whole "
+                              f"multiple of physics_dt ({self.physics_dt:g} s), or simulated time would drift")
+        steps_per_servo = 0
+        if params.servo_rate > 0:
+            steps_per_servo = whole_multiple(1.0 / params.servo_rate, self.physics_dt)
+            if steps_per_servo is None:
+                raise ConfigError(f"sim_node: 1 / servo_rate ({1.0 / params.servo_rate:g} s) must be a whole "
+                                  f"multiple of physics_dt ({self.physics_dt:g} s)")
+        self.servo = ServoCycle(steps_per_servo, params.servo_delay_cycles, self.spec.home_joint_positions)
         self.base_in_camera = np.linalg.inv(
             transform_in(load_static_transforms(), self.spec.base_frame, params.camera_frame))
         self.rng = np.random.default_rng(params.seed)  # camera noise
+        self.outcome_log: Optional[Path] = None
+        if params.outcome_log:
+            self.outcome_log = Path(params.outcome_log)
+            if not self.outcome_log.is_absolute():
+                self.outcome_log = Path.cwd() / self.outcome_log
+            self.outcome_log.parent.mkdir(parents=True, exist_ok=True)
+        self.reset_policy = (rospy.ServiceProxy(params.policy_reset_service, Trigger)
+                             if params.policy_reset_service else None)
 
         # ---- episode state, shared with the callbacks under the lock
         self.lock = threading.Lock()
+        self.command_arrived = threading.Condition(self.lock)
+        self.new_command = False  # lockstep: an arm command arrived since the last /clock
+        self.new_gripper_command = False  # lockstep: a gripper command arrived since the last /clock
         self.episode = 0  # episodes finished
         self.results: List[bool] = []  # success of each finished episode
         self.tcp_path: deque = deque(maxlen=300)  # tcp positions (m, base_link), one per control period
-        # Episodes are timed from the first command on: a policy node still loading its model
-        # must not lose its first episode to the step limit.
-        self.commanded = False
-        self._start_episode()
+        self.late_periods = 0  # lockstep: periods of this episode that went without a command
+        self.arm_command: Optional[Tuple[float, ...]] = None  # newest arm command (rad), None: none yet
+        self.gripper_target = self.spec.max_opening_width
+        self.commanded = False  # episodes are timed from the first command
+        self.holding = True  # between episodes: commands are ignored until the next one starts
+        self.hold_until = 0.0
 
         # ---- ROS interfaces
         self.joint_pub = rospy.Publisher(params.joint_states_topic, JointState, queue_size=10)
         self.target_pub = rospy.Publisher(params.target_topic, PoseStamped, queue_size=10)
         self.marker_pub = rospy.Publisher("~markers", MarkerArray, queue_size=2)
         self.outcome_pub = rospy.Publisher("~episode_outcome", String, queue_size=10, latch=True)
-        rospy.Subscriber(params.command_topic, Float64MultiArray, self._on_arm_command, queue_size=1)
-        rospy.Subscriber(params.gripper_command_topic, Float64, self._on_gripper_command, queue_size=1)
+        self.clock_pub = rospy.Publisher("/clock", Clock, queue_size=1) if params.lockstep else None
+        self.command_sub = rospy.Subscriber(params.command_topic, Float64MultiArray, self._on_arm_command,
+                                            queue_size=1, tcp_nodelay=True)
+        rospy.Subscriber(params.gripper_command_topic, Float64, self._on_gripper_command, queue_size=1,
+                         tcp_nodelay=True)
         rospy.Service("~reset", Trigger, self._on_reset)
+        if not params.lockstep:  # lockstep starts its first episode once the policy node is up
+            with self.lock:
+                self._start_episode()
 
-    # ------------------------------------------------------------------ main loop
+    # ------------------------------------------------------------------ real time
     def spin(self) -> None:
-        """Step physics and publish at ``~publish_rate`` until shutdown or the last episode.
+        """Step physics and publish until shutdown or the last episode, then print the result."""
+        if self.params.lockstep:
+            self._spin_lockstep()
+        else:
+            self._spin_real_time()
+        if self.params.episodes > 0 and self.results:
+            print(f"success rate: {sum(self.results)}/{len(self.results)}", flush=True)
 
-        Simulated time is kept locked to the wall clock, as a real arm's would be: when a tick
-        comes late (a loaded machine), the missed physics steps are run before publishing, so
-        a command always acts for as long in simulation as it did in reality. Every
+    def _spin_real_time(self) -> None:
+        """Simulated time is kept locked to the wall clock, as a real arm's would be: when the
+        loop wakes late (a loaded machine), the missed physics steps are run before publishing,
+        so a command always acts for as long in simulation as it did in reality. Every
         ``control_dt`` of simulated time after the first command, the environment judges the
-        episode.
-        """
+        episode."""
         params, env = self.params, self.env
-        rate = rospy.Rate(params.publish_rate)
-        camera_period = 1.0 / params.camera_rate
-        marker_period = 1.0 / params.marker_rate
-        control_dt = env.control_dt
+        rate = rospy.Rate(1.0 / self.physics_dt)
+        steps_per_period = whole_multiple(env.control_dt, self.physics_dt) or 1
+        camera_period, marker_period = 1.0 / params.camera_rate, 1.0 / params.marker_rate
         start = time.monotonic()
-        sim_time = next_judge = next_camera = next_marker = 0.0
-        max_catch_up = 10 * self.substeps_per_tick  # beyond that, let simulated time slip
+        step = 0  # physics steps since start: simulated time is step * physics_dt
+        next_judge = next_publish = 0
+        next_camera = next_marker = 0.0
+        max_catch_up = 10 * self.steps_per_publish  # beyond that, let simulated time slip
         while not rospy.is_shutdown():
             with self.lock:
                 if self.holding and time.monotonic() >= self.hold_until:
                     if 0 < params.episodes <= self.episode:
                         break
                     self._start_episode()
-                    next_judge = sim_time
-                steps = 0
+                caught_up = 0
                 wall = time.monotonic() - start
-                while sim_time < wall - 0.5 * self.physics_dt and steps < max_catch_up:
-                    env.advance_physics(self.arm_target, self.gripper_target)
-                    sim_time += self.physics_dt
-                    steps += 1
+                while step * self.physics_dt < wall - 0.5 * self.physics_dt and caught_up < max_catch_up:
+                    env.advance_physics(self.servo.targets_for_step(self.arm_command), self.gripper_target)
+                    step += 1
+                    caught_up += 1
                     if not self.commanded:
-                        next_judge = sim_time
-                    elif not self.holding and sim_time >= next_judge + control_dt - 1e-9:
-                        next_judge += control_dt
+                        next_judge = step + steps_per_period  # episodes are timed from the first command
+                    elif not self.holding and step >= next_judge:
+                        next_judge += steps_per_period
                         verdict = env.judge_period()
                         if verdict.ended:
-                            self._finish_episode(verdict)
+                            self._finish_episode(verdict, step * self.physics_dt)
                         self.tcp_path.append(tuple(env.tcp_position()))
+                sim_time = step * self.physics_dt
                 if wall - sim_time > 1.0:  # hopelessly behind: resynchronise rather than race
                     start += wall - sim_time
-                stamp = rospy.Time.now()
-                self.joint_pub.publish(joint_state_message(env.joint_states(), stamp))
-                if sim_time >= next_camera:
-                    next_camera = sim_time + camera_period - 1e-9
-                    self.target_pub.publish(self._camera_message(stamp))
-                if sim_time >= next_marker:
-                    next_marker = sim_time + marker_period - 1e-9
-                    self.marker_pub.publish(scene_markers(env.scene(), env.object_pose(), self.tcp_path, stamp))
+                if step >= next_publish:
+                    next_publish = step + self.steps_per_publish - step % self.steps_per_publish
+                    stamp = rospy.Time.now()
+                    self.joint_pub.publish(self._joint_state_message(stamp))
+                    if sim_time >= next_camera:
+                        next_camera = sim_time + camera_period - 1e-9
+                        self.target_pub.publish(self._camera_message(stamp))
+                    if sim_time >= next_marker:
+                        next_marker = sim_time + marker_period - 1e-9
+                        self.marker_pub.publish(scene_markers(env.scene(), env.object_pose(), self.tcp_path, stamp))
             try:
                 rate.sleep()
             except rospy.ROSInterruptException:
                 break
-        if params.episodes > 0 and self.results:
-            print(f"success rate: {sum(self.results)}/{len(self.results)}", flush=True)
+
+    # ------------------------------------------------------------------ lockstep
+    def _spin_lockstep(self) -> None:
+        """One control period per command: publish the inputs stamped ``t``, then ``/clock`` =
+        ``t``; wait for the command (the policy node's timer fires on the clock); advance one
+        period as gym's ``step`` does; judge. Before an episode's first command the world waits
+        (time passes, physics does not), as a gym episode starts with its first action."""
+        params, env = self.params, self.env
+        period_ns = int(round(env.control_dt * 1e9))  # integer time: 0.02 s steps stay exact
+        marker_period_ns = int(round(1e9 / params.marker_rate))
+        now_ns, next_marker_ns = 1_000_000_000, 0  # start at 1 s: time 0 means "no clock yet" to many nodes
+        self._publish_clock(now_ns)
+        self._wait_for_policy()
+        with self.lock:
+            self._start_episode()
+        wall_start, periods = time.monotonic(), 0
+        while not rospy.is_shutdown():
+            stamp = rospy.Time(0, now_ns)
+            with self.lock:
+                self.joint_pub.publish(self._joint_state_message(stamp))
+                self.target_pub.publish(self._camera_message(stamp))
+                if now_ns >= next_marker_ns:
+                    next_marker_ns = now_ns + marker_period_ns
+                    self.marker_pub.publish(scene_markers(env.scene(), env.object_pose(), self.tcp_path, stamp))
+                self.new_command = self.new_gripper_command = False
+                self._publish_clock(now_ns)
+                arrived = self.command_arrived.wait_for(
+                    lambda: (self.new_command and (self.new_gripper_command or not params.lockstep_gripper))
+                    or rospy.is_shutdown(), timeout=params.lockstep_command_timeout)
+                if self.commanded:
+                    if not arrived:
+                        self.late_periods += 1
+                    env.advance_period(self.arm_command, self.gripper_target)
+                    periods += 1
+                    verdict = env.judge_period()
+                    self.tcp_path.append(tuple(env.tcp_position()))
+                    if verdict.ended:
+                        self._finish_episode(verdict, (now_ns + period_ns) * 1e-9)
+                        if 0 < params.episodes <= self.episode:
+                            break
+                        self._start_episode()
+            now_ns += period_ns
+        wall = time.monotonic() - wall_start
+        if periods:
+            print(f"lockstep: {periods * env.control_dt:.1f} s simulated in {wall:.1f} s of wall time "
+                  f"({periods * env.control_dt / max(wall, 1e-9):.1f}x real time)", flush=True)
+
+    def _publish_clock(self, now_ns: int) -> None:
+        self.clock_pub.publish(Clock(clock=rospy.Time(0, now_ns)))
+
+    def _wait_for_policy(self) -> None:
+        """Lockstep starts once the policy node can be reset and its commands reach us, so no
+        period is lost to connections still being made."""
+        deadline = time.monotonic() + 120.0
+        if self.reset_policy is not None:
+            try:
+                rospy.wait_for_service(self.params.policy_reset_service, timeout=120.0)
+            except rospy.ROSException:
+                rospy.logwarn(f"sim_node: {self.params.policy_reset_service} not offered after 120 s; starting anyway")
+        while self.command_sub.get_num_connections() == 0 and time.monotonic() < deadline \
+                and not rospy.is_shutdown():
+            time.sleep(0.05)
 
     # ------------------------------------------------------------------ episodes (lock held)
     def _start_episode(self) -> None:
-        """Place a new object (seed + episode) and hold the arm where the reset put it."""
+        """Place a new object (seed + episode), hold the arm where the reset put it, and tell
+        the policy node a new episode starts."""
         self.env.reset(seed=self.params.seed + self.episode)
-        self.arm_target = self.env.joint_positions()
+        self.arm_command = None
+        self.servo.reset(self.env.joint_positions())
         self.gripper_target = self.spec.max_opening_width
+        self.commanded = False  # episodes are timed from the first command
         self.holding = False
         self.hold_until = 0.0
+        self.late_periods = 0
         self.tcp_path.clear()
+        if self.reset_policy is not None:
+            try:
+                self.reset_policy()
+            except (rospy.ServiceException, rospy.ROSException) as error:
+                # In lockstep a policy that keeps its old filter state breaks the match with gym.
+                log = rospy.logwarn_throttle if self.params.lockstep else rospy.logdebug_throttle
+                log(30.0, f"sim_node: could not reset the policy node through "
+                                             f"{self.params.policy_reset_service}: {error}")
 
-    def _finish_episode(self, verdict: EpisodeVerdict) -> None:
-        """Publish the outcome, then hold the arm still for ``~pause_between_episodes``."""
+    def _finish_episode(self, verdict: EpisodeVerdict, sim_time: float) -> None:
+        """Publish and log the outcome; in real time, hold the arm still for a moment."""
         self.episode += 1
         self.results.append(bool(verdict.success))
-        record = {"episode": self.episode, "success": bool(verdict.success), "failure": verdict.failure,
-                  "steps": verdict.steps, "seed": self.params.seed + self.episode - 1}
+        record = {"episode": self.episode, "seed": self.params.seed + self.episode - 1,
+                  "success": bool(verdict.success), "failure": verdict.failure or "", "steps": verdict.steps,
+                  "sim_time": round(sim_time, 3)}
+        if self.params.lockstep:
+            record["late_periods"] = self.late_periods
         self.outcome_pub.publish(String(data=json.dumps(record)))
-        rospy.loginfo(f"episode {self.episode}: {'success' if verdict.success else 'failure (' + str(verdict.failure) + ')'}"
+        if self.outcome_log is not None:
+            with self.outcome_log.open("a") as log:
+                log.write(json.dumps(record) + "\n")
+        rospy.loginfo(f"episode {self.episode} (seed {record['seed']}): "
+                      f"{'success' if verdict.success else 'failure (' + str(verdict.failure) + ')'}"
                       f" after {verdict.steps} steps")
         self.holding = True
         self.hold_until = time.monotonic() + self.params.pause_between_episodes
-        self.arm_target = self.env.joint_positions()
+        self.arm_command = tuple(self.env.joint_positions())
 
     # ------------------------------------------------------------------ callbacks
     def _on_arm_command(self, message: Float64MultiArray) -> None:
@@ -180,9 +319,11 @@ class SimulatorNode:
         if not np.array_equal(clamped, values):
             rospy.logwarn_throttle(1.0, "sim_node: arm command outside the joint limits was clamped")
         with self.lock:
-            self.commanded = True
             if not self.holding:
-                self.arm_target = clamped
+                self.commanded = True
+                self.arm_command = tuple(clamped.tolist())
+            self.new_command = True
+            self.command_arrived.notify_all()
 
     def _on_gripper_command(self, message: Float64) -> None:
         width = float(message.data)
@@ -192,13 +333,22 @@ class SimulatorNode:
         with self.lock:
             if not self.holding:
                 self.gripper_target = float(np.clip(width, 0.0, self.spec.max_opening_width))
+            self.new_gripper_command = True
+            self.command_arrived.notify_all()
 
     def _on_reset(self, _request) -> TriggerResponse:
         with self.lock:
             self._start_episode()
         return TriggerResponse(success=True, message=f"episode {self.episode} started")
 
-    # ------------------------------------------------------------------ the camera
+    # ------------------------------------------------------------------ outputs
+    def _joint_state_message(self, stamp: rospy.Time) -> JointState:
+        states = self.env.joint_states()
+        if not self.params.publish_finger_joints:
+            arm = len(self.spec.joint_names)
+            states = JointStates(states.names[:arm], states.positions[:arm], states.velocities[:arm])
+        return joint_state_message(states, stamp)
+
     def _camera_message(self, stamp: rospy.Time) -> PoseStamped:
         """The object's pose as the camera sees it: in ``~camera_frame``, with optional noise."""
         pose = self.env.object_pose()

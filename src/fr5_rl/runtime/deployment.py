@@ -248,9 +248,18 @@ class DeploymentStep:
         self.enabled = True
         # The commanded width is part of the next observation whether or not it is sent, as in
         # training; the gripper starts open, as every episode does.
+        self.max_opening_width = robot.max_opening_width
         self.gripper_command_width = robot.max_opening_width
         self.last_hold: Optional[Hold] = Hold(HoldReason.NO_JOINT_STATE, "starting")
         self._last_target: Optional[np.ndarray] = None
+
+    def start_episode(self) -> None:
+        """Start as an episode starts in training: no action-filter momentum, the gripper
+        commanded open, no memory of the previous target. For a new task on the same arm (an
+        operator placed a new object and homed the arm, or a simulator reset)."""
+        self.shaper.reset()
+        self.gripper_command_width = self.max_opening_width
+        self._last_target = None
 
     def __call__(self, inputs: StepInputs) -> Union[Command, Hold]:
         """The command for this period, or why to hold."""

@@ -59,8 +59,9 @@ class JointStateReader:
         self.arm_joint_names = tuple(arm_joint_names)
         self.finger_joint_names = tuple(finger_joint_names)
         self._known = set(self.arm_joint_names) | set(self.finger_joint_names)
-        # name -> (position rad|m, velocity or None, stamp s, received s)
-        self._joints: Dict[str, Tuple[float, Optional[float], float, float]] = {}
+        # name -> (position rad|m, velocity, stamp or arrival s (for velocity estimates), received s,
+        # header stamp s or 0)
+        self._joints: Dict[str, Tuple[float, float, float, float, float]] = {}
         self._problem: Optional[Tuple[str, float, frozenset]] = None  # text, received, joints it was about
         self._lock = threading.Lock()
 
@@ -77,7 +78,7 @@ class JointStateReader:
                 about = frozenset(name for name in names if name in self._known) or frozenset(self.arm_joint_names)
                 self._problem = (problem, received, about)
                 return problem
-            stamp = stamp or received
+            header_stamp, stamp = stamp, stamp or received
             for index, name in enumerate(names):
                 if name not in self._known:
                     continue  # other joints on the topic are none of the policy's business
@@ -88,7 +89,7 @@ class JointStateReader:
                     velocity = 0.0
                     if previous is not None and stamp - previous[2] > 1e-4:
                         velocity = (position - previous[0]) / (stamp - previous[2])
-                self._joints[name] = (position, velocity, stamp, received)
+                self._joints[name] = (position, velocity, stamp, received, header_stamp)
             if self._problem is not None and self._problem[2] <= set(names):
                 self._problem = None  # a good message brought every joint the bad one was about
         return None
@@ -128,4 +129,5 @@ class JointStateReader:
             fingers = [self._joints.get(name) for name in self.finger_joint_names]
         width = sum(f[0] for f in fingers) if fingers and all(f is not None for f in fingers) else None
         state = ArmJointState(np.array([a[0] for a in arm]), np.array([a[1] for a in arm]), width)
-        return Reading(state, min(a[3] for a in arm))
+        # The state is as old as its oldest joint; without stamps on every joint it has none.
+        return Reading(state, min(a[3] for a in arm), stamp=min(a[4] for a in arm))

@@ -1,0 +1,82 @@
+"""Gripper bridge node: the policy's gripper width (std_msgs/Float64, m) to the FR5 controller's XML-RPC server.
+
+This module is I/O only. Each width on ``~command_topic`` (default ``/fr5/gripper/command``) is
+handed to :class:`~fr5_rl.runtime.gripper_bridge.GripperBridge`, which keeps only the newest
+one and makes every XML-RPC call on its own worker thread: ``ActGripper`` + ``MoveGripper``
+(``~mode`` position) or the manufacturer's ``SetToolDO`` open/close pairs (``~mode`` binary),
+rate-limited, with retries and exponential backoff while the controller is unreachable or
+returns error codes. The subscriber callback never waits on the network.
+
+The bridge's state goes to ``~status`` (std_msgs/String, JSON: mode, connected, last_error,
+last_sent, calls, failures, ...) and ``/diagnostics`` at ``~status_rate``. Errors go to the
+log, throttled per kind (``~error_log_period``). Parameters: ``config/gripper_bridge.yaml``.
+"""
+from __future__ import annotations
+
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from std_msgs.msg import Float64, String
+
+from ..config import ConfigError, load_robot_spec
+from ..runtime.gripper_bridge import BridgeStatus, GripperBridge, GripperBridgeParams
+from .params import exit_if_help_asked, node_parameters
+
+
+def log_to_rosout(level: str, text: str) -> None:
+    """The bridge's reports in the ROS log (already throttled by the bridge)."""
+    {"error": rospy.logerr, "warn": rospy.logwarn}.get(level, rospy.loginfo)(text)
+
+
+class GripperBridgeNode:
+    """Subscriber, status publishers and one :class:`GripperBridge` with its worker thread."""
+
+    def __init__(self) -> None:
+        self.params = params = node_parameters(GripperBridgeParams, "gripper_bridge")
+        max_width = load_robot_spec().max_opening_width
+        self.bridge = GripperBridge(params, max_width, report=log_to_rosout)
+        self.status_pub = rospy.Publisher("~status", String, queue_size=1, latch=True)
+        self.diagnostics_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=1)
+        # queue_size > 1: binary mode's hysteresis should see every width (submit is cheap).
+        rospy.Subscriber(params.command_topic, Float64, self.on_command, queue_size=10, tcp_nodelay=True)
+        rospy.loginfo(f"gripper_bridge: {params.mode} mode, controller {params.controller_url}, "
+                      f"commands from {rospy.resolve_name(params.command_topic)}, max opening {max_width:g} m")
+        self.bridge.start()
+        rospy.on_shutdown(self.bridge.stop)
+        self.status_timer = rospy.Timer(rospy.Duration(1.0 / params.status_rate), self.publish_status)
+
+    def on_command(self, message: Float64) -> None:
+        self.bridge.submit(message.data)  # stores the width and returns: no XML-RPC here
+
+    def publish_status(self, _event: rospy.timer.TimerEvent) -> None:
+        status = self.bridge.status()
+        self.status_pub.publish(String(data=status.to_json()))
+        self.diagnostics_pub.publish(diagnostics_message(status, rospy.get_name()))
+
+
+def diagnostics_message(status: BridgeStatus, node_name: str) -> DiagnosticArray:
+    """``/diagnostics``: OK while connected without error, WARN on controller errors, ERROR when lost."""
+    entry = DiagnosticStatus(name=f"{node_name.lstrip('/')}: FR5 gripper", hardware_id=status.controller_url)
+    if not status.connected:
+        entry.level, entry.message = DiagnosticStatus.ERROR, "controller not reachable"
+    elif status.last_error:
+        entry.level, entry.message = DiagnosticStatus.WARN, status.last_error
+    else:
+        entry.level, entry.message = DiagnosticStatus.OK, "connected"
+    entry.values = [KeyValue(key=key, value=str(value)) for key, value in
+                    (("mode", status.mode), ("last_sent", status.last_sent), ("desired", status.desired),
+                     ("calls", status.calls), ("failures", status.failures), ("retry_in_s", status.retry_in))]
+    message = DiagnosticArray(status=[entry])
+    message.header.stamp = rospy.Time.now()
+    return message
+
+
+def main() -> int:
+    exit_if_help_asked("gripper_bridge_node.py", __doc__.split("\n\n")[0], "gripper_bridge")
+    rospy.init_node("fr5_gripper_bridge")
+    try:
+        GripperBridgeNode()
+    except ConfigError as error:
+        rospy.logfatal(f"gripper_bridge: {error}")
+        return 1
+    rospy.spin()
+    return 0
