@@ -25,10 +25,14 @@ demo: setup
 test: setup
 	@$(ENV) bash tools/run_tests.sh
 
-# Env speed + inference latency, the ROS loop (timing, sim-to-ROS parity), time to solve reach.
+# Env speed + inference latency, the ROS loop (timing, sim-to-ROS parity, one core busy), lockstep
+# against gym over 200 seeds per model, time to solve reach.
 # BENCH_ARGS=--quick for a smoke run; `make bench-grasp` adds the grasp time to solve (~15 min).
 bench: setup
 	@$(ENV) python tools/bench_ros.py
+	@$(ENV) python tools/bench_ros.py --busy-cores 1
+	@$(ENV) python tools/bench_lockstep.py --model models/reach --real-time
+	@$(ENV) python tools/bench_lockstep.py --model models/grasp
 	@$(ENV) python tools/bench_train.py --task reach
 	@$(ENV) python tools/bench.py $(BENCH_ARGS)
 

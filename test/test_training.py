@@ -451,3 +451,32 @@ def test_off_policy_short_run(algo, tmp_path):
     # the exported actor matches SB3 for this algorithm too
     export(latest)
     assert parity(latest, 200) <= 1e-5
+
+
+# ----------------------------------------------------------------------------- --init-from (fine-tuning)
+def test_init_from_continues_the_given_model(ppo_run, tmp_path):
+    """A fine-tuning run starts from the given weights and statistics (not from scratch) and
+    counts its own steps; its meta says where it came from."""
+    import torch
+    from stable_baselines3 import PPO
+
+    source = ppo_run / "checkpoints" / "latest"
+    run_dir = tmp_path / "fine"
+    code = train.main(["--init-from", str(source), "--timesteps", "512", "--n-envs", "1", "--no-subprocess",
+                       "--checkpoint-freq", "256", "--eval-freq", "100000", "--no-progress", "--run-dir", str(run_dir)])
+    assert code == 0
+    meta = read_json(run_dir / "final" / "meta.json")
+    assert meta["initialised_from"]["model"] == str(source) and meta["initialised_from"]["num_timesteps"] >= 3000
+    assert 512 <= meta["num_timesteps"] < 3000  # this run's steps only
+    before = PPO.load(source / "model.zip", device="cpu").policy.state_dict()
+    after = PPO.load(run_dir / "final" / "model.zip", device="cpu").policy.state_dict()
+    moved = [float((after[k] - before[k]).abs().max()) for k in before if before[k].dtype == torch.float32]
+    assert max(moved) > 0.0  # it trained ...
+    assert max(moved) < 0.5  # ... a little, from the source's weights (a fresh init is far away)
+
+
+def test_init_from_refuses_another_task(ppo_run, tmp_path, capsys):
+    code = train.main(["--task", "grasp", "--init-from", str(ppo_run / "checkpoints" / "latest"), "--timesteps",
+                       "256", "--n-envs", "1", "--no-subprocess", "--no-progress", "--run-dir", str(tmp_path / "r")])
+    assert code == 2
+    assert "task is 'reach'" in capsys.readouterr().err

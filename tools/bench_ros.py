@@ -1,6 +1,6 @@
 """ROS loop benchmark: control-loop timing inside the policy node and sim-to-ROS parity.
 
-    python tools/bench_ros.py [--model models/reach] [--episodes 20] [--backend onnx]
+    python tools/bench_ros.py [--model models/reach] [--episodes 20] [--backend onnx] [--busy-cores 1]
 
 Starts ``sim_policy.launch`` headless on its own ROS master, records the policy node's
 per-cycle timing (``/fr5_policy/timing``: loop period, inference, compute latency from reading
@@ -8,7 +8,8 @@ the inputs to publishing, age of the joint state used), and compares the closed-
 rate through ROS with the gym evaluation of the same model on the same placements (seeds).
 Writes bench/results/ros_loop_<task>.json and updates that bench's entries in
 bench/results/summary.json. Targets: latency p99 <= 3 ms, period jitter p99 <= 2 ms, parity
-within 5 points.
+within 5 points. ``--busy-cores N`` keeps N cores busy with bare ``while True`` loops (as a
+robot computer's camera drivers and perception would) and writes ros_loop_<task>_busy<N>.json.
 """
 import argparse
 import os
@@ -22,15 +23,19 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from benchlib import AT_MOST, REPO, RESULTS_DIR, latency_ms, relative_path, update_summary, verdict, write_result
+from benchlib import AT_LEAST, AT_MOST, REPO, RESULTS_DIR, latency_ms, relative_path, update_summary, verdict, write_result
 
-TARGETS = {"compute_latency_p99_ms": 3.0, "period_jitter_p99_ms": 2.0, "parity_points": 5.0}
+TARGETS = {"compute_latency_p99_ms": 3.0, "period_jitter_p99_ms": 2.0, "parity_points": 5.0, "busy_success_rate": 0.95}
 
 
 def ros_verdicts(result: Dict[str, Any]) -> Dict[str, Dict[str, Any]]:
     """Compute latency p99 <= 3 ms, period jitter p99 <= 2 ms, ROS-vs-gym gap <= 5 points; a
     timing never recorded is not met."""
     task = result.get("task")
+    if result.get("busy_cores"):
+        # A busy computer is judged on what the arm does: success as on a quiet one.
+        return {"busy_success_rate": verdict(result.get("ros_success_rate"), TARGETS["busy_success_rate"], AT_LEAST,
+                                             "", f"{task} success with {result['busy_cores']} core(s) busy")}
     return {
         "compute_latency_p99_ms": verdict((result.get("compute_latency") or {}).get("p99_ms"),
                                           TARGETS["compute_latency_p99_ms"], AT_MOST, "ms",
@@ -50,6 +55,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--backend", choices=["torch", "onnx"], default="onnx")
     parser.add_argument("--seed", type=int, default=700000)
     parser.add_argument("--port", type=int, default=11411)
+    parser.add_argument("--busy-cores", type=int, default=0, help="cores to keep busy during the run (0)")
     parser.add_argument("--results", type=Path, default=RESULTS_DIR,
                         help="output directory (default bench/results); its summary.json is updated")
     args = parser.parse_args(argv)
@@ -60,6 +66,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     task = meta["task"]
     env = dict(os.environ, ROS_MASTER_URI=f"http://localhost:{args.port}")
     os.environ["ROS_MASTER_URI"] = env["ROS_MASTER_URI"]
+    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy_cores)]
     launch = subprocess.Popen(
         ["roslaunch", "-p", str(args.port), "fr5_rl", "sim_policy.launch", "rviz:=false", f"model:={args.model}",
          f"task:={task}", f"backend:={args.backend}", f"episodes:={args.episodes}", f"seed:={args.seed}"],
@@ -90,6 +97,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     except subprocess.TimeoutExpired:
         os.killpg(launch.pid, signal.SIGKILL)
     rospy.signal_shutdown("done")
+    for process in busy:
+        process.kill()
     timing = np.array(samples[5:]) if len(samples) > 5 else np.zeros((0, 4))  # skip start-up cycles
     control_dt = float(meta.get("control_dt", 0.02))
 
@@ -106,6 +115,7 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     result = {
         "model": relative_path(model_dir), "task": task, "backend": args.backend, "episodes": episodes,
+        "busy_cores": args.busy_cores, "cores": os.cpu_count(),
         "seeds": [args.seed, args.seed + args.episodes - 1],
         "ros_success_rate": ros_rate, "gym_success_rate_same_seeds": gym_rate,
         "parity_gap_points": round(100 * abs(ros_rate - gym_rate), 1),
@@ -125,7 +135,8 @@ def main(argv: Optional[List[str]] = None) -> int:
           f"gap {result['parity_gap_points']} points")
     for v in verdicts.values():
         print(f"  {v['text']}")
-    path = write_result(args.results / f"ros_loop_{task}.json", result, verdicts)
+    name = f"ros_loop_{task}" + (f"_busy{args.busy_cores}" if args.busy_cores else "")
+    path = write_result(args.results / f"{name}.json", result, verdicts)
     summary = update_summary(args.results, path.stem, path)
     print(f"wrote {os.path.relpath(path)}, {os.path.relpath(summary)}")
     return 0

@@ -31,6 +31,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--timesteps", type=int, default=None, help="default: the config's n_timesteps")
     parser.add_argument("--run-dir", type=Path, default=None, help="default: runs/<task>_<algo>_<time>")
     parser.add_argument("--resume", action="store_true", help="continue --run-dir from its last checkpoint")
+    parser.add_argument("--init-from", type=Path, default=None, metavar="MODEL_DIR",
+                        help="start from this trained model (weights + VecNormalize statistics) instead of "
+                             "from scratch: fine-tuning, e.g. on a harder randomisation (same task and algo)")
     parser.add_argument("--checkpoint-freq", type=int, default=20_000, help="steps between checkpoints (20000)")
     parser.add_argument("--eval-freq", type=int, default=20_000, help="steps between evaluations (20000)")
     parser.add_argument("--eval-episodes", type=int, default=40, help="episodes per evaluation (40)")

@@ -16,8 +16,9 @@ from typing import Any, Dict, Optional
 
 
 from ..config import ConfigError, Hyperparameters, load_yaml, typed
-from ..runtime.bundle import (MODEL_FILE, STATS_FILE, algorithm_class, build_meta, check_sb3_zip, damaged,
-                              machine_description, recover_model_dir, save_model_dir, write_json_atomic)
+from ..runtime.bundle import (MODEL_FILE, STATS_FILE, algorithm_class, build_meta, check_files_present,
+                              check_sb3_zip, damaged, machine_description, read_meta, recover_model_dir,
+                              save_model_dir, write_json_atomic)
 from .algorithms import check_hyperparameters, hyperparameter_source, load_hyperparameters
 from .callbacks import REPLAY_FILE, save_checkpoint
 
@@ -101,6 +102,32 @@ def close_vec_env(venv, interrupted: bool) -> None:
     venv.close()
 
 
+def initialise_from(model_dir: Path, task: str, algo: str, venv, meta: Dict[str, Any], run_dir: Path):
+    """A trained model and its VecNormalize statistics, bound to this run's environments.
+
+    :raises ConfigError: the model is for another task, algorithm or observation/action size.
+    :raises ModelFilesError: its files are missing or damaged.
+    """
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    source = read_meta(model_dir)
+    for key in ("task", "algo", "observation_size", "action_size"):
+        if source.get(key) != meta.get(key):
+            raise ConfigError(f"--init-from {model_dir}: its {key} is {source.get(key)!r}, this run's is "
+                              f"{meta.get(key)!r}; start from a model of the same task and algorithm")
+    check_files_present(model_dir, "torch")
+    check_sb3_zip(model_dir / MODEL_FILE)
+    try:
+        venv = VecNormalize.load(str(model_dir / STATS_FILE), venv)
+    except Exception as error:
+        venv.close()
+        raise damaged(model_dir / STATS_FILE, error, "VecNormalize statistics") from None
+    venv.training = True  # the statistics keep adapting to the new randomisation
+    model = algorithm_class(algo).load(model_dir / MODEL_FILE, env=venv, device="cpu",
+                                       tensorboard_log=str(run_dir / "tb"))
+    return model, venv
+
+
 def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any]) -> int:
     """Run (or resume) one training run; returns the exit status (0 done, 130 interrupted).
 
@@ -167,6 +194,17 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any]) ->
         if (latest / REPLAY_FILE).is_file():
             model.load_replay_buffer(latest / REPLAY_FILE)
         print(f"train.py: resuming {run_dir} from step {model.num_timesteps}")
+    elif getattr(args, "init_from", None) is not None and not args.resume:
+        model, venv = initialise_from(args.init_from, args.task, args.algo, venv, meta, run_dir)
+        meta["initialised_from"] = {"model": str(args.init_from), "num_timesteps": int(model.num_timesteps)}
+        model.num_timesteps = 0  # --timesteps counts this run's steps
+        write_json_atomic(run_dir / "config.json", {
+            "task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
+            "timesteps": args.timesteps, "hyperparams_resolved": hyper.to_dict(), "init_from": str(args.init_from),
+            "checkpoint_freq": args.checkpoint_freq, "eval_freq": args.eval_freq,
+            "eval_episodes": args.eval_episodes, "no_subprocess": args.no_subprocess,
+            "target_success": args.target_success})
+        print(f"train.py: starting from {args.init_from} ({meta['initialised_from']['num_timesteps']} steps)")
     else:
         if args.resume:
             print(f"train.py: {run_dir} has no checkpoint yet; starting it from scratch")
