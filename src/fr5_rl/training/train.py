@@ -102,30 +102,47 @@ def close_vec_env(venv, interrupted: bool) -> None:
     venv.close()
 
 
+def write_run_config(run_dir: Path, args: argparse.Namespace, hyper: Hyperparameters, **extra: Any) -> None:
+    """``config.json``: everything ``--resume`` needs to continue the run as it was started."""
+    write_json_atomic(run_dir / "config.json", {
+        "task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
+        "timesteps": args.timesteps, "hyperparams_resolved": hyper.to_dict(),
+        "checkpoint_freq": args.checkpoint_freq, "eval_freq": args.eval_freq,
+        "eval_episodes": args.eval_episodes, "no_subprocess": args.no_subprocess,
+        "target_success": args.target_success, **extra})
+
+
 def initialise_from(model_dir: Path, task: str, algo: str, venv, meta: Dict[str, Any], run_dir: Path):
     """A trained model and its VecNormalize statistics, bound to this run's environments.
 
     :raises ConfigError: the model is for another task, algorithm or observation/action size.
     :raises ModelFilesError: its files are missing or damaged.
     """
-    from stable_baselines3.common.vec_env import VecNormalize
-
     source = read_meta(model_dir)
     for key in ("task", "algo", "observation_size", "action_size"):
         if source.get(key) != meta.get(key):
             raise ConfigError(f"--init-from {model_dir}: its {key} is {source.get(key)!r}, this run's is "
                               f"{meta.get(key)!r}; start from a model of the same task and algorithm")
     check_files_present(model_dir, "torch")
+    model, venv = load_trained(model_dir, algorithm_class(algo), venv, tensorboard_log=str(run_dir / "tb"))
+    venv.training = True  # the statistics keep adapting to the new randomisation
+    return model, venv
+
+
+def load_trained(model_dir: Path, algo_cls, venv, **load_kwargs: Any):
+    """The SB3 model in ``model_dir`` and its VecNormalize statistics around ``venv``.
+
+    :raises ModelFilesError: a damaged ``model.zip`` or ``vecnormalize.pkl``.
+    """
+    from stable_baselines3.common.vec_env import VecNormalize
+
     check_sb3_zip(model_dir / MODEL_FILE)
     try:
         venv = VecNormalize.load(str(model_dir / STATS_FILE), venv)
     except Exception as error:
         venv.close()
         raise damaged(model_dir / STATS_FILE, error, "VecNormalize statistics") from None
-    venv.training = True  # the statistics keep adapting to the new randomisation
-    model = algorithm_class(algo).load(model_dir / MODEL_FILE, env=venv, device="cpu",
-                                       tensorboard_log=str(run_dir / "tb"))
-    return model, venv
+    return algo_cls.load(model_dir / MODEL_FILE, env=venv, device="cpu", **load_kwargs), venv
 
 
 def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any]) -> int:
@@ -184,13 +201,7 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any]) ->
     elapsed_before = float(summary.get("wall_time_s", 0.0))
 
     if args.resume and recover_model_dir(latest):
-        check_sb3_zip(latest / MODEL_FILE)
-        try:
-            venv = VecNormalize.load(str(latest / STATS_FILE), venv)
-        except Exception as error:
-            venv.close()
-            raise damaged(latest / STATS_FILE, error, "VecNormalize statistics") from None
-        model = algo_cls.load(latest / MODEL_FILE, env=venv, device="cpu")
+        model, venv = load_trained(latest, algo_cls, venv)
         if (latest / REPLAY_FILE).is_file():
             model.load_replay_buffer(latest / REPLAY_FILE)
         print(f"train.py: resuming {run_dir} from step {model.num_timesteps}")
@@ -198,12 +209,7 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any]) ->
         model, venv = initialise_from(args.init_from, args.task, args.algo, venv, meta, run_dir)
         meta["initialised_from"] = {"model": str(args.init_from), "num_timesteps": int(model.num_timesteps)}
         model.num_timesteps = 0  # --timesteps counts this run's steps
-        write_json_atomic(run_dir / "config.json", {
-            "task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
-            "timesteps": args.timesteps, "hyperparams_resolved": hyper.to_dict(), "init_from": str(args.init_from),
-            "checkpoint_freq": args.checkpoint_freq, "eval_freq": args.eval_freq,
-            "eval_episodes": args.eval_episodes, "no_subprocess": args.no_subprocess,
-            "target_success": args.target_success})
+        write_run_config(run_dir, args, hyper, init_from=str(args.init_from))
         print(f"train.py: starting from {args.init_from} ({meta['initialised_from']['num_timesteps']} steps)")
     else:
         if args.resume:
@@ -215,12 +221,7 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any]) ->
         policy = kwargs.pop("policy", "MlpPolicy")
         model = algo_cls(policy, venv, seed=args.seed, device="cpu", tensorboard_log=str(run_dir / "tb"),
                          verbose=0, **kwargs)
-        write_json_atomic(run_dir / "config.json", {
-            "task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
-            "timesteps": args.timesteps, "hyperparams_resolved": hyper.to_dict(),
-            "checkpoint_freq": args.checkpoint_freq, "eval_freq": args.eval_freq,
-            "eval_episodes": args.eval_episodes, "no_subprocess": args.no_subprocess,
-            "target_success": args.target_success})
+        write_run_config(run_dir, args, hyper)
     eval_env = VecNormalize(eval_env, training=False, norm_obs=venv.norm_obs, norm_reward=False,
                             clip_obs=venv.clip_obs)
     summary.update({"task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
