@@ -76,3 +76,21 @@ def test_static_transforms_loader_gives_matrices():
     entries = load_static_transforms()
     camera = next(e for e in entries if e["child"] == "camera_link")
     assert camera["matrix"].shape == (4, 4) and camera["matrix"][2, 3] == pytest.approx(camera["xyz"][2])
+
+
+@pytest.mark.parametrize("key, value", [("command_delay_s", [0.01, 0.005]), ("observation_age_s", [-0.01, 0.0]),
+                                        ("command_delay_s", [0.0, 0.05])])
+def test_period_timing_ranges_are_checked(key, value):
+    """A command delay or observation age is a time inside one 20 ms period, low <= high."""
+    from fr5_rl.config import load_env_config
+
+    with pytest.raises(ConfigError, match=key):
+        load_env_config({"randomisation": {key: value}})
+
+
+def test_whole_multiple():
+    from fr5_rl.config import whole_multiple
+
+    assert whole_multiple(0.02, 0.004) == 5 and whole_multiple(0.008, 0.004) == 2
+    assert whole_multiple(0.02, 0.003) is None and whole_multiple(0.002, 0.004) is None
+    assert whole_multiple(0.02, 0.0) is None

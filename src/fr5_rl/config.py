@@ -171,21 +171,34 @@ def simulation_settings(cfg: Mapping[str, Any], task: str) -> Dict[str, Any]:
     return merged
 
 
+def whole_multiple(period: float, step: float) -> Optional[int]:
+    """``period / step`` when ``step`` > 0 divides ``period`` a whole number (>= 1) of times,
+    else None: how many physics steps make one control period, servo cycle or publish period."""
+    if step <= 0:
+        return None
+    ratio = period / step
+    return int(round(ratio)) if ratio >= 1.0 - 1e-6 and abs(ratio - round(ratio)) <= 1e-6 else None
+
+
 def validate_env_config(cfg: Mapping[str, Any], robot: RobotSpec) -> None:
     """Refuse settings that would break the real robot's limits or the simulation."""
     for task in ("base", "reach", "grasp"):
         sim = cfg["simulation"] if task == "base" else simulation_settings(cfg, task)
         control_dt, physics_dt = float(sim["control_dt"]), float(sim["physics_dt"])
-        substeps = control_dt / physics_dt if physics_dt > 0 else 0.0
-        if physics_dt <= 0 or abs(substeps - round(substeps)) > 1e-6 or round(substeps) < 1:
+        if whole_multiple(control_dt, physics_dt) is None:
             raise ConfigError(
                 f"{task}: simulation.physics_dt ({physics_dt}) must divide control_dt ({control_dt}) evenly"
             )
     control_dt = float(cfg["simulation"]["control_dt"])
-    for choice in cfg.get("randomisation", {}).get("physics_dt_choices") or []:
-        ratio = control_dt / float(choice)
-        if float(choice) <= 0 or abs(ratio - round(ratio)) > 1e-6:
+    randomisation = cfg.get("randomisation", {})
+    for choice in randomisation.get("physics_dt_choices") or []:
+        if whole_multiple(control_dt, float(choice)) is None:
             raise ConfigError(f"randomisation.physics_dt_choices: {choice} must divide control_dt ({control_dt})")
+    for key in ("command_delay_s", "observation_age_s"):
+        low, high = (float(value) for value in randomisation.get(key, (0.0, 0.0)))
+        if not 0.0 <= low <= high <= control_dt:
+            raise ConfigError(f"randomisation.{key}: [{low}, {high}] must satisfy 0 <= low <= high <= control_dt "
+                              f"({control_dt} s): it is a time inside one control period")
     max_step = float(cfg["action"]["max_joint_step"])
     allowed = float(np.min(robot.velocity_limits)) * control_dt
     if not 0.0 < max_step <= allowed + 1e-12:

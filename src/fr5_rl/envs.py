@@ -175,6 +175,7 @@ class FR5Env(gym.Env):
         # ranges (s) drawn every step, and the command standing until a delayed one takes over.
         self._command_delay_range = (0.0, 0.0)
         self._observation_age_range = (0.0, 0.0)
+        self._period_timing = False  # either range above is non-zero: step's slower path
         self._standing_command: Tuple[Sequence[float], float] = ((), 0.0)
         self._steps = 0
         self._state: Optional[TaskState] = None  # the last one observed
@@ -365,6 +366,9 @@ class FR5Env(gym.Env):
         :return: the robot's measurement (:meth:`FR5Robot.measure`) taken early, or None when
             the observation is measured at the end of the period.
         """
+        if not self._period_timing:
+            self.advance_period(arm_targets, gripper_width)
+            return None
         substeps, physics_dt = self.world.substeps, self.world.physics_dt
         delay = self._draw_substeps(self._command_delay_range, substeps - 1)
         age = self._draw_substeps(self._observation_age_range, substeps - 1)
@@ -488,3 +492,4 @@ class FR5Env(gym.Env):
         self._obs_noise_std = float(rnd["observation_noise_std"]) if on else 0.0
         self._command_delay_range = tuple(float(v) for v in rnd["command_delay_s"]) if on else (0.0, 0.0)
         self._observation_age_range = tuple(float(v) for v in rnd["observation_age_s"]) if on else (0.0, 0.0)
+        self._period_timing = self._command_delay_range[1] > 0.0 or self._observation_age_range[1] > 0.0

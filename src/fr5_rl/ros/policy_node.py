@@ -15,9 +15,9 @@ gate: the same code the environments use), then publishes what comes back:
 episode starts (no action-filter momentum, gripper commanded open), for a new object after the
 arm was homed. On simulated time (``/use_sim_time``, a lockstep simulator) each period first
 waits, up to ``~sim_time_input_wait`` wall seconds, for the joint state and target stamped at the
-period's start, so the outcome does not depend on which topic arrived first. Per-cycle timing goes to ``~timing``
-(Float64MultiArray: loop period, inference time, compute latency, joint-state age, all
-seconds) and a summary to ``/diagnostics`` at 1 Hz. Parameters: ``config/policy_node.yaml``.
+period's start, so the outcome does not depend on which topic arrived first. Per-cycle timing
+goes to ``~timing`` (Float64MultiArray: loop period, inference time, compute latency,
+joint-state age, all seconds) and a summary to ``/diagnostics`` at 1 Hz. Parameters: ``config/policy_node.yaml``.
 """
 from __future__ import annotations
 
@@ -98,7 +98,8 @@ class PolicyNode:
             self.next_period: Optional[rospy.Time] = None
             rospy.Subscriber("/clock", Clock, self.on_clock, queue_size=1, tcp_nodelay=True)
         else:
-            self.timer = rospy.Timer(rospy.Duration(self.control_dt), lambda event: self.control_period(event.current_real))
+            self.timer = rospy.Timer(rospy.Duration(self.control_dt),
+                                     lambda event: self.control_period(event.current_real))
         self.diagnostics_timer = rospy.Timer(rospy.Duration(1.0), self.publish_diagnostics)
         rospy.loginfo(f"policy_node: {policy.task} model {model_dir} ({policy.backend}), {params.rate:g} Hz, "
                       f"gripper commands {'on' if params.command_gripper else 'off'}")
@@ -178,8 +179,8 @@ class PolicyNode:
         with self.inputs_changed:
             joint_state = self.reader.reading()
             if self.sim_time and joint_state is not None:
-                # A tick that waited past its period already used the next period's inputs;
-                # the next tick must not command that period a second time.
+                # A period that waited until the next period's inputs came (its own were lost
+                # before the connections stood) already commanded that period: not twice.
                 if joint_state.stamp > 0.0 and joint_state.stamp == self.last_input_stamp:
                     return
                 self.last_input_stamp = joint_state.stamp

@@ -50,17 +50,11 @@ from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import Trigger, TriggerResponse
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..config import ConfigError, SimNodeParams, package_root
+from ..config import ConfigError, SimNodeParams, whole_multiple
 from ..envs import EpisodeVerdict, FR5Env, JointStates, Pose, SceneDescription
 from ..sim.servo import ServoCycle
 from ..transforms import load_static_transforms, matrix_from_quaternion, quaternion_from_matrix, transform_in
 from .params import exit_if_help_asked, node_parameters
-
-
-def whole_multiple(period: float, step: float) -> Optional[int]:
-    """``period / step`` when it is a whole number >= 1, else None."""
-    ratio = period / step
-    return int(round(ratio)) if ratio >= 1.0 - 1e-6 and abs(ratio - round(ratio)) <= 1e-6 else None
 
 
 class SimulatorNode:
@@ -212,24 +206,21 @@ class SimulatorNode:
         period_ns = int(round(env.control_dt * 1e9))  # integer time: 0.02 s steps stay exact
         marker_period_ns = int(round(1e9 / params.marker_rate))
         now_ns, next_marker_ns = 1_000_000_000, 0  # start at 1 s: time 0 means "no clock yet" to many nodes
-        self._publish_clock(now_ns)
+        self.clock_pub.publish(Clock(clock=rospy.Time(0, now_ns)))
         self._wait_for_policy()
+        now_ns = self._warm_up(now_ns, period_ns)
         with self.lock:
             self._start_episode()
         wall_start, periods = time.monotonic(), 0
         while not rospy.is_shutdown():
-            stamp = rospy.Time(0, now_ns)
             with self.lock:
-                self.joint_pub.publish(self._joint_state_message(stamp))
-                self.target_pub.publish(self._camera_message(stamp))
                 if now_ns >= next_marker_ns:
                     next_marker_ns = now_ns + marker_period_ns
-                    self.marker_pub.publish(scene_markers(env.scene(), env.object_pose(), self.tcp_path, stamp))
-                self.new_command = self.new_gripper_command = False
-                self._publish_clock(now_ns)
-                arrived = self.command_arrived.wait_for(
-                    lambda: (self.new_command and (self.new_gripper_command or not params.lockstep_gripper))
-                    or rospy.is_shutdown(), timeout=params.lockstep_command_timeout)
+                    self.marker_pub.publish(scene_markers(env.scene(), env.object_pose(), self.tcp_path,
+                                                          rospy.Time(0, now_ns)))
+                self._open_period(now_ns)
+                arrived = self.command_arrived.wait_for(self._period_commanded,
+                                                        timeout=params.lockstep_command_timeout)
                 if self.commanded:
                     if not arrived:
                         self.late_periods += 1
@@ -248,8 +239,38 @@ class SimulatorNode:
             print(f"lockstep: {periods * env.control_dt:.1f} s simulated in {wall:.1f} s of wall time "
                   f"({periods * env.control_dt / max(wall, 1e-9):.1f}x real time)", flush=True)
 
-    def _publish_clock(self, now_ns: int) -> None:
-        self.clock_pub.publish(Clock(clock=rospy.Time(0, now_ns)))
+    def _warm_up(self, now_ns: int, period_ns: int) -> int:
+        """Run periods without physics until one command arrives within its period: every
+        connection the loop uses then stands, so the first episode loses no message. The world
+        only waits (commands are ignored), so the reset that follows leaves it as gym's does.
+
+        :return: the time (ns) after the warm-up.
+        """
+        with self.lock:
+            self._start_episode()
+            self.holding = True  # commands are counted, not obeyed
+        arrived = False
+        while not arrived and not rospy.is_shutdown():
+            with self.lock:
+                self._open_period(now_ns)
+                arrived = self.command_arrived.wait_for(self._period_commanded,
+                                                        timeout=self.params.lockstep_command_timeout)
+            now_ns += period_ns
+        return now_ns
+
+    def _open_period(self, now_ns: int) -> None:
+        """Lockstep (lock held): the inputs stamped ``now_ns``, then ``/clock`` = ``now_ns``,
+        which starts the policy node's period; its commands count from here on."""
+        stamp = rospy.Time(0, now_ns)
+        self.joint_pub.publish(self._joint_state_message(stamp))
+        self.target_pub.publish(self._camera_message(stamp))
+        self.new_command = self.new_gripper_command = False
+        self.clock_pub.publish(Clock(clock=stamp))
+
+    def _period_commanded(self) -> bool:
+        """Lockstep: this period's arm command (and gripper command) arrived, or shutdown."""
+        return (self.new_command and (self.new_gripper_command or not self.params.lockstep_gripper)) \
+            or rospy.is_shutdown()
 
     def _wait_for_policy(self) -> None:
         """Lockstep starts once the policy node can be reset and its commands reach us, so no
@@ -284,7 +305,7 @@ class SimulatorNode:
                 # In lockstep a policy that keeps its old filter state breaks the match with gym.
                 log = rospy.logwarn_throttle if self.params.lockstep else rospy.logdebug_throttle
                 log(30.0, f"sim_node: could not reset the policy node through "
-                                             f"{self.params.policy_reset_service}: {error}")
+                          f"{self.params.policy_reset_service}: {error}")
 
     def _finish_episode(self, verdict: EpisodeVerdict, sim_time: float) -> None:
         """Publish and log the outcome; in real time, hold the arm still for a moment."""

@@ -45,11 +45,11 @@ class ServoCycle:
         """
         if self.steps_per_cycle == 0:
             if newest_command is not None:
-                self.applied = tuple(float(value) for value in newest_command)
+                self.applied = tuple(newest_command)
             return self.applied
         if self._steps % self.steps_per_cycle == 0:
             if newest_command is not None:
-                self._latched = tuple(float(value) for value in newest_command)
+                self._latched = tuple(newest_command)
             self._in_flight.append(self._latched)
             self.applied = self._in_flight.popleft()
         self._steps += 1
