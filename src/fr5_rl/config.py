@@ -362,10 +362,13 @@ class SimNodeParams:
     camera_noise_std: float
     marker_rate: float
     pause_between_episodes: float
+    reset_settle_time: float
     joint_states_topic: str
     command_topic: str
     gripper_command_topic: str
     target_topic: str
+    publish_target: bool
+    object_topic: str
     publish_finger_joints: bool
     servo_rate: float
     servo_delay_cycles: int
@@ -383,8 +386,9 @@ class SimNodeParams:
             raise ConfigError(f"{source}: 'task' must be reach or grasp, got {self.task!r}")
         _positive(source, publish_rate=self.publish_rate, physics_dt=self.physics_dt, camera_rate=self.camera_rate,
                   marker_rate=self.marker_rate, solver_iterations=self.solver_iterations)
-        if self.episodes < 0 or self.camera_noise_std < 0 or self.pause_between_episodes < 0:
-            raise ConfigError(f"{source}: episodes, camera_noise_std and pause_between_episodes must be >= 0")
+        if min(self.episodes, self.camera_noise_std, self.pause_between_episodes, self.reset_settle_time) < 0:
+            raise ConfigError(f"{source}: episodes, camera_noise_std, pause_between_episodes and reset_settle_time "
+                              "must be >= 0")
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,8 @@ Writes a JSON summary (success rate with its 95 % Wilson interval, mean episode 
 failure causes, the seeds) and a CSV with one row per episode. ``--gif`` records one rollout
 headless; ``--plot RUN_DIR`` draws the learning curve of a training run. ``--expert TASK``
 measures the scripted expert instead of a model; ``--config`` / ``--training-env`` evaluate
-under noise, latency, mass and friction changes.
+under noise, latency, mass and friction changes. ``--ray`` spreads the episodes over a Ray
+cluster (``--address``, or RAY_ADDRESS, else a local Ray): same seeds, same files, same outcomes.
 """
 from __future__ import annotations
 
@@ -35,8 +36,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", type=Path, default=None, help="summary JSON (default: MODEL_DIR/eval.json)")
     parser.add_argument("--csv", type=Path, default=None, help="per-episode CSV (default: beside the summary)")
     parser.add_argument("--gif", type=Path, default=None, help="record the first episode as a GIF")
+    parser.add_argument("--no-map", action="store_true",
+                        help="skip the success map (<summary>_map.png/.json: success and failures by object placement)")
     parser.add_argument("--plot", type=Path, default=None, metavar="RUN_DIR", help="draw RUN_DIR's learning curve")
     parser.add_argument("--plot-out", type=Path, default=None)
+    parser.add_argument("--ray", action="store_true", help="spread the episodes over a Ray cluster (Ray tasks)")
+    parser.add_argument("--address", default=None,
+                        help="with --ray: the cluster, auto or HOST:PORT (default: RAY_ADDRESS, else a local Ray)")
     return parser
 
 
@@ -88,7 +94,16 @@ def evaluate(args: argparse.Namespace) -> int:
 
         overrides = deep_update(deep_update(load_yaml("env"), overrides), json.loads(args.config))
     seeds = list(range(args.seed_start, args.seed_start + args.episodes))
-    records = run_episodes(task, overrides, make_actor, seeds, gif_path=args.gif)
+    if getattr(args, "ray", False):
+        if args.gif:
+            raise ConfigError("--gif records on this machine; run it without --ray")
+        from ..training.ray_eval import run_episodes_on_ray
+
+        records, nodes = run_episodes_on_ray(task, overrides, seeds, None if args.expert else args.model_dir,
+                                             args.backend, args.address)
+        print(f"evaluated on Ray: {len(nodes)} tasks on {len(set(nodes))} nodes")
+    else:
+        records = run_episodes(task, overrides, make_actor, seeds, gif_path=args.gif)
     summary = summarise(records)
     summary.update({"policy": label, "task": task, "backend": args.backend if not args.expert else "expert",
                     "deterministic": True, "seeds": [seeds[0], seeds[-1]], "env_overrides": overrides,
@@ -99,6 +114,14 @@ def evaluate(args: argparse.Namespace) -> int:
     out = args.out or (args.model_dir / EVAL_FILE if args.model_dir else Path(f"eval_{task}_expert.json"))
     csv_path = args.csv or out.with_suffix(".csv")
     write_results(summary, records, out, csv_path)
+    if not args.no_map:
+        from ..config import load_env_config
+        from ..training.success_map import write_success_map
+
+        maps = write_success_map(records, load_env_config(overrides), out.with_name(out.stem + "_map"),
+                                 f"{label} on {task}: {summary['successes']}/{summary['episodes']} "
+                                 f"(seeds {seeds[0]}-{seeds[-1]})")
+        print(f"wrote {maps[1]} and {maps[0]}")
     low, high = summary["success_rate_95ci"]
     print(f"{label} on {task}: success {summary['successes']}/{summary['episodes']} = "
           f"{summary['success_rate']:.1%} (95% CI {low:.1%}-{high:.1%}), mean length "

@@ -10,11 +10,16 @@ against it:
   dropped with a throttled error) through the driver's servo cycle (``~servo_rate``,
   ``~servo_delay_cycles``), and ``~gripper_command_topic`` (std_msgs/Float64, opening width in m);
 - acts as the camera: the object's pose on ``~target_topic`` (geometry_msgs/PoseStamped) in
-  ``~camera_frame``, computed with config/static_transforms.yaml and optional noise;
+  ``~camera_frame``, computed with config/static_transforms.yaml and optional noise (unless
+  ``~publish_target`` is false: a detector on a simulated camera publishes it instead);
+- publishes the object's true pose, size and shape (visualization_msgs/Marker in base_link) on
+  ``~object_topic`` with every joint state, stamped alike, for the simulated camera (camera_node);
 - publishes rviz markers (table, object, tcp path) on ``~markers``;
 - judges each episode with the environment's own success test, publishes the outcome (JSON in
   std_msgs/String) on ``~episode_outcome`` (and appends it to ``~outcome_log``), calls the policy
-  node's ``~policy_reset_service``, then places a new object and homes the arm; ``~reset``
+  node's ``~policy_reset_service``, then places a new object and homes the arm (in real time
+  with ``~reset_settle_time`` > 0 it first holds the new scene that long, so a camera in the
+  loop sees it before the policy starts); ``~reset``
   (std_srvs/Trigger) does that at once. With ``~episodes`` = N > 0 it stops after N episodes and
   prints ``success rate: K/N`` as its last line.
 
@@ -117,10 +122,14 @@ class SimulatorNode:
         self.commanded = False  # episodes are timed from the first command
         self.holding = True  # between episodes: commands are ignored until the next one starts
         self.hold_until = 0.0
+        self.settling = False  # the new scene is placed, the policy not yet told (~reset_settle_time)
 
         # ---- ROS interfaces
         self.joint_pub = rospy.Publisher(params.joint_states_topic, JointState, queue_size=10)
-        self.target_pub = rospy.Publisher(params.target_topic, PoseStamped, queue_size=10)
+        self.target_pub = (rospy.Publisher(params.target_topic, PoseStamped, queue_size=10)
+                           if params.publish_target else None)
+        self.object_pub = (rospy.Publisher(params.object_topic, Marker, queue_size=10)
+                           if params.object_topic else None)
         self.marker_pub = rospy.Publisher("~markers", MarkerArray, queue_size=2)
         self.outcome_pub = rospy.Publisher("~episode_outcome", String, queue_size=10, latch=True)
         self.clock_pub = rospy.Publisher("/clock", Clock, queue_size=1) if params.lockstep else None
@@ -161,9 +170,12 @@ class SimulatorNode:
         while not rospy.is_shutdown():
             with self.lock:
                 if self.holding and time.monotonic() >= self.hold_until:
-                    if 0 < params.episodes <= self.episode:
+                    if self.settling:
+                        self._begin_episode()
+                    elif 0 < params.episodes <= self.episode:
                         break
-                    self._start_episode()
+                    else:
+                        self._start_episode(settle=params.reset_settle_time)
                 caught_up = 0
                 wall = time.monotonic() - start
                 while step * self.physics_dt < wall - 0.5 * self.physics_dt and caught_up < max_catch_up:
@@ -184,8 +196,8 @@ class SimulatorNode:
                 if step >= next_publish:
                     next_publish = step + self.steps_per_publish - step % self.steps_per_publish
                     stamp = rospy.Time.now()
-                    self.joint_pub.publish(self._joint_state_message(stamp))
-                    if sim_time >= next_camera:
+                    self._publish_state(stamp)
+                    if sim_time >= next_camera and self.target_pub is not None:
                         next_camera = sim_time + camera_period - 1e-9
                         self.target_pub.publish(self._camera_message(stamp))
                     if sim_time >= next_marker:
@@ -262,8 +274,9 @@ class SimulatorNode:
         """Lockstep (lock held): the inputs stamped ``now_ns``, then ``/clock`` = ``now_ns``,
         which starts the policy node's period; its commands count from here on."""
         stamp = rospy.Time(0, now_ns)
-        self.joint_pub.publish(self._joint_state_message(stamp))
-        self.target_pub.publish(self._camera_message(stamp))
+        self._publish_state(stamp)
+        if self.target_pub is not None:
+            self.target_pub.publish(self._camera_message(stamp))
         self.new_command = self.new_gripper_command = False
         self.clock_pub.publish(Clock(clock=stamp))
 
@@ -286,18 +299,29 @@ class SimulatorNode:
             time.sleep(0.05)
 
     # ------------------------------------------------------------------ episodes (lock held)
-    def _start_episode(self) -> None:
+    def _start_episode(self, settle: float = 0.0) -> None:
         """Place a new object (seed + episode), hold the arm where the reset put it, and tell
-        the policy node a new episode starts."""
+        the policy node a new episode starts; with ``settle`` (s) > 0, tell it only after the
+        arm held the new scene that long (the real-time loop calls :meth:`_begin_episode`)."""
         self.env.reset(seed=self.params.seed + self.episode)
         self.arm_command = None
         self.servo.reset(self.env.joint_positions())
         self.gripper_target = self.spec.max_opening_width
         self.commanded = False  # episodes are timed from the first command
-        self.holding = False
-        self.hold_until = 0.0
         self.late_periods = 0
         self.tcp_path.clear()
+        if settle > 0.0:
+            # A camera in the loop delivers the new scene a pipeline latency later: until then
+            # the policy would act on the old object's position.
+            self.holding, self.settling = True, True
+            self.hold_until = time.monotonic() + settle
+            return
+        self._begin_episode()
+
+    def _begin_episode(self) -> None:
+        """Obey commands from now on and tell the policy node a new episode starts."""
+        self.holding, self.settling = False, False
+        self.hold_until = 0.0
         if self.reset_policy is not None:
             try:
                 self.reset_policy()
@@ -369,6 +393,13 @@ class SimulatorNode:
             arm = len(self.spec.joint_names)
             states = JointStates(states.names[:arm], states.positions[:arm], states.velocities[:arm])
         return joint_state_message(states, stamp)
+
+    def _publish_state(self, stamp: rospy.Time) -> None:
+        """The joint state and, for the simulated camera, the object's true pose, stamped alike."""
+        self.joint_pub.publish(self._joint_state_message(stamp))
+        if self.object_pub is not None:
+            marker = scene_markers(self.env.scene(), self.env.object_pose(), (), stamp).markers[1]
+            self.object_pub.publish(marker)
 
     def _camera_message(self, stamp: rospy.Time) -> PoseStamped:
         """The object's pose as the camera sees it: in ``~camera_frame``, with optional noise."""

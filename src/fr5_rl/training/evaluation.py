@@ -45,6 +45,7 @@ def run_episodes(task: str, env_overrides: Dict[str, Any], make_actor, seeds: Li
     frames = []
     for index, seed in enumerate(seeds):
         obs, _ = env.reset(seed=int(seed))
+        object_x, object_y = (round(float(value), 5) for value in env.object_position()[:2])
         if on_reset:
             on_reset()
         done, steps, total, info = False, 0, 0.0, {}
@@ -57,7 +58,8 @@ def run_episodes(task: str, env_overrides: Dict[str, Any], make_actor, seeds: Li
                 frames.append(env.render())
         records.append({"seed": int(seed), "success": bool(info.get("is_success", False)),
                         "failure": info.get("failure") or "", "length": steps, "return": round(total, 4),
-                        "final_distance_m": round(float(np.linalg.norm(env.object_position() - env.tcp_position())), 5)})
+                        "final_distance_m": round(float(np.linalg.norm(env.object_position() - env.tcp_position())), 5),
+                        "object_x": object_x, "object_y": object_y})
     env.close()
     if gif_path is not None and frames:
         from PIL import Image

@@ -12,7 +12,7 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Any, Dict, Optional
+from typing import Any, Callable, Dict, Optional, Sequence
 
 
 from ..config import ConfigError, Hyperparameters, load_yaml, typed
@@ -56,12 +56,17 @@ def make_env_factory(task: str, env_overrides: Dict[str, Any], seed: int, rank: 
 
 
 def make_vec_env(task: str, env_overrides: Dict[str, Any], n_envs: int, seed: int,
-                 monitor_dir: Optional[Path], subprocess: bool):
+                 monitor_dir: Optional[Path], subprocess: bool, start_method: str = "forkserver"):
+    """``n_envs`` environments, in subprocesses (``start_method``) when ``subprocess`` and n_envs > 1.
+
+    :param start_method: ``forkserver`` (train.py), or ``spawn`` inside a Ray worker, where forking
+        a process that runs Ray's threads can hang.
+    """
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     factories = [make_env_factory(task, env_overrides, seed, rank, monitor_dir) for rank in range(n_envs)]
     if subprocess and n_envs > 1:
-        return SubprocVecEnv(factories, start_method="forkserver")
+        return SubprocVecEnv(factories, start_method=start_method)
     return DummyVecEnv(factories)
 
 
@@ -145,13 +150,18 @@ def load_trained(model_dir: Path, algo_cls, venv, **load_kwargs: Any):
     return algo_cls.load(model_dir / MODEL_FILE, env=venv, device="cpu", **load_kwargs), venv
 
 
-def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any]) -> int:
+def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
+          extra_callbacks: Optional[Callable[[Path, Dict[str, Any], Dict[str, Any]], Sequence[Any]]] = None) -> int:
     """Run (or resume) one training run; returns the exit status (0 done, 130 interrupted).
 
-    :param args: the command line's options (see :mod:`fr5_rl.cli.train`).
+    :param args: the command line's options (see :mod:`fr5_rl.cli.train`); an optional
+        ``start_method`` attribute picks the subprocess start method (default forkserver).
     :param t_start: wall-clock start (s since the epoch), for wall time and time to solve.
     :param defaults: every option's default, so a resumed run keeps its own settings unless an
         option is given again.
+    :param extra_callbacks: called as ``extra_callbacks(run_dir, meta, summary)``; the SB3
+        callbacks it returns run after the evaluation callback at every step (e.g. reporting
+        to Ray Tune, see :mod:`fr5_rl.training.tune`).
     :raises ConfigError: a configuration problem, before any training time is spent.
     """
     import torch
@@ -192,7 +202,7 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any]) ->
     probe.close()
 
     venv = make_vec_env(args.task, env_overrides, args.n_envs, args.seed, run_dir / "monitor",
-                        not args.no_subprocess)
+                        not args.no_subprocess, getattr(args, "start_method", "forkserver"))
     eval_env = make_vec_env(args.task, env_overrides, 1, args.seed + EVAL_SEED_OFFSET, None, False)
     algo_cls = algorithm_class(args.algo)
     latest = run_dir / "checkpoints" / "latest"
@@ -227,6 +237,8 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any]) ->
     summary.update({"task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
                     "machine": machine_description(), "target_success": args.target_success})
     callbacks = build_callbacks(args, run_dir, eval_env, meta, t_start - elapsed_before, summary)
+    if extra_callbacks is not None:
+        callbacks.callbacks.extend(extra_callbacks(run_dir, meta, summary))
     remaining = max(args.timesteps - int(model.num_timesteps), 0)
     interrupted = False
     try:

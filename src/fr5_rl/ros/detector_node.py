@@ -1,0 +1,316 @@
+"""Detector node: the object's centre from an aligned RGB-D camera, as /target_pose.
+
+It subscribes to colour, aligned depth and the colour CameraInfo, synchronised with
+message_filters (``~sync_slop``), and hands each frame to
+:class:`fr5_rl.runtime.detection.ObjectDetector` with the camera's pose over the table from tf2
+(``~table_frame`` <- the image's frame). It needs no knowledge of the object's colour: it looks
+for the one thing standing on the table inside the placement region (config/env.yaml).
+
+- a detection: geometry_msgs/PoseStamped of the object centre on ``~target_topic``, in the
+  image's optical frame, with the image's stamp (orientation: the table's, upright);
+- the object hidden by the robot while it goes down around it, or held in its fingers: the
+  position :class:`fr5_rl.runtime.detection.ObjectTracker` keeps (the last seen one, for
+  ``~hidden_timeout``; the tcp's pose from tf times the grasp offset while the fingers, from
+  ``~joint_states_topic``, are closed on it), stamped with the new image; ``~track_state``
+  (std_msgs/String) says which: ``seen``, ``hidden``, ``in hand`` or ``holding: <why>``;
+- no detection (nothing, several candidates, the object hidden too long or gone) or bad input
+  (image sizes that differ, an unknown encoding, a missing or zero CameraInfo, depth that is
+  all zero or NaN, a frame older than ``~max_image_age``): nothing is published (the policy
+  node holds once its target is stale) and a warning says why, at once when the reason
+  changes, then at most every 2 s.
+
+Every frame also goes to ``~debug_image_topic`` (rgb8) with the detection drawn (green: seen,
+yellow: hidden, blue: in the hand; a red frame when there is none), and per-frame compute times
+to ``~timing`` (Float64MultiArray: decode, detect, track, total, all seconds; and the image's
+age when the frame arrived). The default topics are the RealSense driver's, so on a real camera the
+node runs as it is. Parameters: ``config/detector.yaml``.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Deque, List, Optional, Tuple, Union
+
+import message_filters
+import numpy as np
+import rospy
+import tf2_ros
+from geometry_msgs.msg import PoseStamped
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import Float64MultiArray, String
+
+from ..config import ConfigError, load_env_config, load_robot_spec
+from ..runtime.detection import (Detection, DetectorSettings, InputError, ObjectDetector, ObjectTracker, Refusal,
+                                 RefusalReason, TrackedObject, TrackerSettings, TrackState, check_frame, decode_color,
+                                 decode_depth, draw_detection, intrinsics_from_camera_info)
+from ..runtime.pinhole import Intrinsics
+from ..transforms import matrix_from_quaternion, quaternion_from_matrix
+from .images import image_message
+from .params import exit_if_help_asked, node_parameters
+
+TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.ExtrapolationException,
+             tf2_ros.InvalidArgumentException)
+
+
+@dataclass(frozen=True)
+class DetectorNodeParams:
+    """``config/detector.yaml``: the detector node's ~private parameters."""
+
+    color_topic: str
+    depth_topic: str
+    camera_info_topic: str
+    target_topic: str
+    debug_image_topic: str
+    table_frame: str
+    sync_slop: float
+    max_image_age: float
+    region_margin: float
+    min_height: float
+    max_object_height: float
+    top_tolerance: float
+    object_height: float
+    min_area: float
+    max_area: float
+    robot_margin_px: int
+    min_valid_depth_fraction: float
+    hidden_timeout: float
+    in_hand_timeout: float
+    max_table_fraction: float
+    front_tolerance: float
+    grasp_radius: float
+    grasp_width_margin: float
+    min_grasp_fraction: float
+    closing_tolerance: float
+    closing_axis: List[float]
+    tcp_frame: str
+    joint_states_topic: str
+    track_state_topic: str
+
+    def check(self, source: str) -> None:
+        if self.sync_slop <= 0 or self.max_image_age <= 0:
+            raise ConfigError(f"{source}: sync_slop and max_image_age must be > 0")
+        if min(self.hidden_timeout, self.in_hand_timeout, self.front_tolerance, self.grasp_radius,
+               self.grasp_width_margin, self.min_grasp_fraction) < 0 or not 0 <= self.max_table_fraction <= 1:
+            raise ConfigError(f"{source}: the tracking parameters must be >= 0 and max_table_fraction in [0, 1] "
+                              "(hidden_timeout 0 switches tracking off)")
+        if len(self.closing_axis) != 3 or not np.linalg.norm(self.closing_axis) > 0:
+            raise ConfigError(f"{source}: closing_axis must be a non-zero 3-vector (the fingers' direction in "
+                              f"the tcp frame), got {self.closing_axis}")
+        if not 0 <= self.min_height < self.max_object_height or not 0 < self.min_area < self.max_area:
+            raise ConfigError(f"{source}: needs 0 <= min_height < max_object_height and 0 < min_area < max_area")
+
+
+def settings_from(params: DetectorNodeParams) -> DetectorSettings:
+    """The detector's settings: config/detector.yaml's thresholds, env.yaml's table and region."""
+    env = load_env_config()
+    return DetectorSettings(
+        region_low=tuple(float(v) for v in env["object"]["region_low"]),
+        region_high=tuple(float(v) for v in env["object"]["region_high"]),
+        region_margin=params.region_margin, table_height=float(env["table"]["top_height"]),
+        min_height=params.min_height, max_object_height=params.max_object_height,
+        top_tolerance=params.top_tolerance, object_height=params.object_height, min_area=params.min_area,
+        max_area=params.max_area, robot_margin_px=params.robot_margin_px,
+        min_valid_depth_fraction=params.min_valid_depth_fraction)
+
+
+def tracker_settings_from(params: DetectorNodeParams) -> TrackerSettings:
+    """The tracker's settings from config/detector.yaml."""
+    return TrackerSettings(hidden_timeout=params.hidden_timeout, in_hand_timeout=params.in_hand_timeout,
+                           max_table_fraction=params.max_table_fraction, front_tolerance=params.front_tolerance,
+                           grasp_radius=params.grasp_radius, grasp_width_margin=params.grasp_width_margin,
+                           min_grasp_fraction=params.min_grasp_fraction, closing_tolerance=params.closing_tolerance,
+                           closing_axis=tuple(params.closing_axis))
+
+
+class DetectorNode:
+    """Synchronised image subscribers, tf2, the tracker, and the target and debug publishers."""
+
+    def __init__(self) -> None:
+        self.params = params = node_parameters(DetectorNodeParams, "detector")
+        settings = settings_from(params)
+        self.detector = ObjectDetector(settings)
+        self.tracker = ObjectTracker(tracker_settings_from(params), settings)
+        self.last_refusal: Optional[RefusalReason] = None
+        self.last_track: Optional[TrackState] = None
+        self.finger_names = load_robot_spec().finger_joint_names
+        # (stamp s, opening m) of recent joint states, to read the opening at an image's stamp.
+        self.widths: Deque[Tuple[float, float]] = deque(maxlen=400)
+        self.widths_lock = threading.Lock()
+        self.warned_no_hand = False
+        self.table_from_optical: Optional[np.ndarray] = None  # of the last frame tf could place
+        self.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
+        self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
+        self.target_pub = rospy.Publisher(params.target_topic, PoseStamped, queue_size=1)
+        self.debug_pub = rospy.Publisher(params.debug_image_topic, Image, queue_size=1)
+        self.state_pub = rospy.Publisher(params.track_state_topic, String, queue_size=1)
+        self.timing_pub = rospy.Publisher("~timing", Float64MultiArray, queue_size=10)
+        rospy.Subscriber(params.joint_states_topic, JointState, self.on_joint_state, queue_size=10, tcp_nodelay=True)
+        # Images are large: rospy's default receive buffer would queue them behind each other.
+        # One deep: when the detector falls behind, the newest frame is the one worth detecting.
+        subscribers = [message_filters.Subscriber(topic, kind, queue_size=1, buff_size=1 << 24, tcp_nodelay=True)
+                       for topic, kind in ((params.color_topic, Image), (params.depth_topic, Image),
+                                           (params.camera_info_topic, CameraInfo))]
+        self.sync = message_filters.ApproximateTimeSynchronizer(subscribers, queue_size=5, slop=params.sync_slop)
+        self.sync.registerCallback(self.on_frame)
+        # A missing input (no camera_info at all) never completes a frame: watch each one.
+        self.last_arrival = {topic: 0.0 for topic in (params.color_topic, params.depth_topic, params.camera_info_topic)}
+        self.last_frame = time.monotonic()
+        for subscriber, topic in zip(subscribers, self.last_arrival):
+            subscriber.registerCallback(lambda _message, topic=topic: self.last_arrival.__setitem__(topic, time.monotonic()))
+        self.watchdog = rospy.Timer(rospy.Duration(1.0), self.check_inputs)
+        rospy.loginfo(f"detector_node: {params.color_topic} + {params.depth_topic} + {params.camera_info_topic} "
+                      f"-> {params.target_topic}")
+
+    def on_joint_state(self, message: JointState) -> None:
+        """Keep the fingers' opening (m, the sum of the finger joints) by stamp."""
+        try:
+            width = sum(message.position[message.name.index(name)] for name in self.finger_names)
+        except (ValueError, IndexError):
+            return  # a message without the fingers (e.g. the arm driver's)
+        with self.widths_lock:
+            self.widths.append((message.header.stamp.to_sec(), float(width)))
+
+    def width_at(self, stamp: float) -> Optional[float]:
+        """The fingers' opening (m) nearest ``stamp`` (s) within 0.1 s; None when unknown."""
+        with self.widths_lock:
+            if not self.widths:
+                return None
+            nearest = min(reversed(self.widths), key=lambda entry: abs(entry[0] - stamp))
+        return nearest[1] if abs(nearest[0] - stamp) <= 0.1 else None
+
+    def tcp_at(self, stamp: rospy.Time) -> Optional[np.ndarray]:
+        """The tcp's pose (4x4, m) in the table frame at ``stamp``, or the newest one; None without tf."""
+        for when in (stamp, rospy.Time(0)):
+            try:
+                transform = self.tf_buffer.lookup_transform(self.params.table_frame, self.params.tcp_frame, when)
+            except TF_ERRORS:
+                continue
+            t, r = transform.transform.translation, transform.transform.rotation
+            return matrix_from_quaternion((t.x, t.y, t.z), (r.x, r.y, r.z, r.w))
+        return None
+
+    def check_inputs(self, _event) -> None:
+        """Warn when frames stopped although images come: an input is missing or out of sync."""
+        now = time.monotonic()
+        if now - self.last_frame < 2.0 or not any(now - t < 1.0 for t in self.last_arrival.values()):
+            return
+        silent = [topic for topic, t in self.last_arrival.items() if now - t >= 1.0]
+        self.report(Refusal(RefusalReason.CAMERA_INFO if self.params.camera_info_topic in silent
+                            else RefusalReason.STALE,
+                            f"no synchronised frame for {now - self.last_frame:.0f} s; silent: {', '.join(silent) or 'none'}"
+                            + ("" if silent else f" (stamps further apart than ~sync_slop {self.params.sync_slop:g} s?)")))
+
+    def on_frame(self, color: Image, depth: Image, info: CameraInfo) -> None:
+        """One synchronised frame: refuse, or detect (and track) and publish."""
+        self.last_frame = time.monotonic()
+        started = time.perf_counter()
+        age = rospy.Time.now().to_sec() - color.header.stamp.to_sec()
+        result: Union[Detection, Refusal]
+        rgb: Optional[np.ndarray] = None
+        detected = decoded = started
+        try:
+            intrinsics = intrinsics_from_camera_info(info.width, info.height, info.K, info.P)
+            rgb = decode_color(color.encoding, color.height, color.width, color.step, color.data,
+                               bool(color.is_bigendian))
+            depth_m = decode_depth(depth.encoding, depth.height, depth.width, depth.step, depth.data,
+                                   bool(depth.is_bigendian))
+        except InputError as error:
+            result = error.refusal
+        else:
+            stamp = color.header.stamp
+            decoded = time.perf_counter()
+            result = check_frame(rgb, depth_m, intrinsics, stamp.to_sec(), rospy.Time.now().to_sec(),
+                                 self.params.max_image_age, self.params.min_valid_depth_fraction)
+            if result is None:
+                result = self.detect(rgb, depth_m, intrinsics, color)
+            detected = time.perf_counter()
+            result = self.track(result, depth_m, intrinsics, stamp)
+        tracked = time.perf_counter()
+        if isinstance(result, TrackedObject):
+            self.publish_target(result, color)
+        else:
+            self.report(result)
+        self.timing_pub.publish(Float64MultiArray(data=[decoded - started, detected - decoded, tracked - detected,
+                                                        time.perf_counter() - started, age]))
+        if rgb is not None and self.debug_pub.get_num_connections() > 0:
+            drawn = draw_detection(rgb, result, intrinsics, self.table_from_optical)
+            self.debug_pub.publish(image_message(drawn, "rgb8", color.header.stamp, color.header.frame_id))
+
+    def track(self, result: Union[Detection, Refusal], depth_m: np.ndarray, intrinsics: Intrinsics,
+              stamp: rospy.Time) -> Union[TrackedObject, Refusal]:
+        """The tracker's answer for a frame the detector looked at (``result``).
+
+        :param depth_m: the frame's depth (m, 0 = none).
+        :param stamp: the frame's capture time.
+        """
+        tcp = self.tcp_at(stamp)
+        width = self.width_at(stamp.to_sec())
+        if (tcp is None or width is None) and not self.warned_no_hand:
+            missing = (f"tf {self.params.table_frame} <- {self.params.tcp_frame} (robot_state_publisher?)"
+                       if tcp is None else f"finger joints on {self.params.joint_states_topic} (gripper driver?)")
+            rospy.logwarn(f"detector_node: no {missing}: an object held in the gripper cannot be followed, only a "
+                          "hidden one held at its last position; publish it to follow grasped objects")
+            self.warned_no_hand = True
+        return self.tracker.update(result, stamp.to_sec(), depth_m, intrinsics, self.table_from_optical, tcp, width)
+
+    def detect(self, rgb: np.ndarray, depth_m: np.ndarray, intrinsics, color: Image) -> Union[Detection, Refusal]:
+        try:
+            transform = self.tf_buffer.lookup_transform(self.params.table_frame, color.header.frame_id, rospy.Time(0))
+        except TF_ERRORS as error:
+            return Refusal(RefusalReason.NO_TRANSFORM, f"{color.header.frame_id} -> {self.params.table_frame}: {error}")
+        t, r = transform.transform.translation, transform.transform.rotation
+        self.table_from_optical = matrix_from_quaternion((t.x, t.y, t.z), (r.x, r.y, r.z, r.w))
+        return self.detector.detect(depth_m, intrinsics, self.table_from_optical, rgb)
+
+    def publish_target(self, tracked: TrackedObject, color: Image) -> None:
+        if self.last_refusal is not None:
+            rospy.loginfo(f"detector_node: object found again (was: {self.last_refusal.value})")
+            self.last_refusal = None
+        if tracked.state != self.last_track:
+            # Said at every change: a published position that was not seen this frame is news.
+            age = color.header.stamp.to_sec() - tracked.last_seen
+            rospy.loginfo(f"detector_node: object {tracked.state.value}"
+                          + ("" if tracked.state is TrackState.SEEN else f" (last seen {age:.2f} s ago)"))
+            self.last_track = tracked.state
+        self.state_pub.publish(String(data=tracked.state.value))
+        message = PoseStamped()
+        message.header.stamp = color.header.stamp
+        position, orientation = message.pose.position, message.pose.orientation
+        if tracked.position_tcp is not None:
+            # Held: in the tcp frame, so the user's tf places it at the newest tcp pose rather
+            # than the one of this (older) image. Orientation: the tcp's (held upright, as grasped).
+            message.header.frame_id = self.params.tcp_frame
+            position.x, position.y, position.z = tracked.position_tcp
+            orientation.w = 1.0
+        else:
+            message.header.frame_id = color.header.frame_id
+            optical_from_table = np.linalg.inv(self.table_from_optical)
+            position.x, position.y, position.z = (optical_from_table @ np.append(tracked.position_table, 1.0))[:3]
+            # An upright object: the table's orientation, seen from the camera.
+            orientation.x, orientation.y, orientation.z, orientation.w = quaternion_from_matrix(
+                optical_from_table[:3, :3])
+        self.target_pub.publish(message)
+
+    def report(self, refusal: Refusal) -> None:
+        self.state_pub.publish(String(data=f"holding: {refusal}"))
+        self.last_track = None
+        # At once when the kind of problem changes, then at most every 2 s.
+        if refusal.reason != self.last_refusal:
+            rospy.logwarn(f"detector_node: holding: {refusal}")
+        else:
+            rospy.logwarn_throttle(2.0, f"detector_node: holding: {refusal}")
+        self.last_refusal = refusal.reason
+
+
+def main() -> int:
+    exit_if_help_asked("detector_node.py", __doc__.split("\n\n")[0], "detector")
+    rospy.init_node("detector")
+    try:
+        DetectorNode()
+    except ConfigError as error:
+        rospy.logfatal(str(error))
+        return 1
+    rospy.spin()
+    return 0

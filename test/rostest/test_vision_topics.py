@@ -1,0 +1,60 @@
+#!/usr/bin/env python3
+"""rostest node: the vision chain's messages. The camera publishes rgb8 colour, 16UC1 depth and
+a CameraInfo of one size, stamped alike, in the optical frame; the detector's /target_pose is in
+that frame (or the tcp frame, for an object held in the gripper) with an image's stamp, and
+lies within 5 mm of the simulator's true object centre of the same instant (ground truth on
+/fr5_sim/object)."""
+import unittest
+
+import numpy as np
+import rospy
+import rostest
+import tf2_ros
+from geometry_msgs.msg import PoseStamped
+from sensor_msgs.msg import CameraInfo, Image
+from visualization_msgs.msg import Marker
+
+from fr5_rl.transforms import matrix_from_quaternion
+
+
+class TestVisionTopics(unittest.TestCase):
+    def test_camera_and_detector_messages(self):
+        color = rospy.wait_for_message("/camera/color/image_raw", Image, timeout=60.0)
+        depth = rospy.wait_for_message("/camera/aligned_depth_to_color/image_raw", Image, timeout=10.0)
+        info = rospy.wait_for_message("/camera/color/camera_info", CameraInfo, timeout=10.0)
+        self.assertEqual((color.encoding, depth.encoding), ("rgb8", "16UC1"))
+        self.assertEqual({(m.width, m.height) for m in (color, depth, info)}, {(info.width, info.height)})
+        self.assertEqual({m.header.frame_id for m in (color, depth, info)}, {"camera_color_optical_frame"})
+        self.assertGreater(info.K[0], 0.0)
+
+        truths = {}
+        rospy.Subscriber("/fr5_sim/object", Marker, lambda m: truths.__setitem__(m.header.stamp.to_nsec(), m),
+                         queue_size=200)
+        buffer = tf2_ros.Buffer()
+        tf2_ros.TransformListener(buffer)
+        errors = []
+        deadline = rospy.get_time() + 60.0
+        while len(errors) < 10 and rospy.get_time() < deadline:
+            target = rospy.wait_for_message("/target_pose", PoseStamped, timeout=30.0)
+            # An object held in the gripper is published in the tcp frame (it moves with it).
+            self.assertIn(target.header.frame_id, ("camera_color_optical_frame", "tcp"))
+            if target.header.frame_id != "camera_color_optical_frame":
+                continue
+            truth = truths.get(target.header.stamp.to_nsec())
+            if truth is None:
+                continue  # the ground truth of that instant arrived before this subscriber stood
+            t = buffer.lookup_transform("base_link", target.header.frame_id, rospy.Time(0), rospy.Duration(5.0))
+            tr, r = t.transform.translation, t.transform.rotation
+            base_from_optical = matrix_from_quaternion((tr.x, tr.y, tr.z), (r.x, r.y, r.z, r.w))
+            p = target.pose.position
+            found = (base_from_optical @ np.array([p.x, p.y, p.z, 1.0]))[:3]
+            q = truth.pose.position
+            errors.append(float(np.linalg.norm(found - [q.x, q.y, q.z])))
+        self.assertGreaterEqual(len(errors), 5, "too few detections matched to the ground truth of their instant")
+        rospy.loginfo(f"detector error vs truth (m): {errors}")
+        self.assertLess(float(np.median(errors)), 0.005)
+
+
+if __name__ == "__main__":
+    rospy.init_node("test_vision_topics")
+    rostest.rosrun("fr5_rl", "test_vision_topics", TestVisionTopics)

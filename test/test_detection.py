@@ -1,0 +1,323 @@
+"""The detector's algorithm and its input checks, on synthetic depth images (no ROS, no pybullet).
+
+The scene: a camera 1 m above the table looking straight down; boxes are drawn as the depth of
+their top faces (what such a camera sees of them)."""
+import numpy as np
+import pytest
+
+from fr5_rl.runtime.detection import (Detection, DetectorSettings, InputError, ObjectDetector, ObjectTracker, Refusal,
+                                      RefusalReason, TrackedObject, TrackerSettings, TrackState, check_frame,
+                                      decode_color, decode_depth, draw_detection, footprint_view,
+                                      intrinsics_from_camera_info, label_components)
+from fr5_rl.runtime.pinhole import Intrinsics
+from fr5_rl.transforms import matrix_from_xyz_rpy
+
+K = Intrinsics(640, 480, 615.0, 615.0, 322.0, 238.0)
+# Optical frame 1 m above the table origin, z down, x along table +x, y along table -y.
+TABLE_FROM_OPTICAL = matrix_from_xyz_rpy([0.0, 0.0, 1.0], [np.pi, 0.0, 0.0])
+SETTINGS = DetectorSettings(region_low=(-0.3, -0.3), region_high=(0.3, 0.3))
+
+
+def scene(*boxes):
+    """Depth (m) of the table with boxes (cx, cy, half_x, half_y, height) seen from above."""
+    u, v = np.meshgrid(np.arange(K.width), np.arange(K.height))
+    x, y = K.ray(u, v)
+    depth = np.ones((K.height, K.width), dtype=np.float32)
+    for cx, cy, hx, hy, height in boxes:
+        z = 1.0 - height
+        tx, ty = x * z, -(y * z)  # the top face's plane, in table coordinates
+        inside = (np.abs(tx - cx) <= hx) & (np.abs(ty - cy) <= hy)
+        depth[inside] = np.minimum(depth[inside], z)
+    return depth
+
+
+def detect(depth, settings=SETTINGS):
+    return ObjectDetector(settings).detect(depth, K, TABLE_FROM_OPTICAL)
+
+
+def test_one_object_gives_its_centre():
+    found = detect(scene((0.1, -0.05, 0.025, 0.025, 0.06)))
+    assert isinstance(found, Detection), found
+    np.testing.assert_allclose(found.position_table, (0.1, -0.05, 0.03), atol=1.5e-3)
+    # The optical-frame position is the same point.
+    back = TABLE_FROM_OPTICAL @ np.array([*found.position, 1.0])
+    np.testing.assert_allclose(back[:3], found.position_table, atol=1e-9)
+    assert found.top_height == pytest.approx(0.06, abs=1e-3)
+
+
+def test_known_object_height_places_the_centre_below_the_top():
+    lifted = scene((0.0, 0.0, 0.025, 0.025, 0.08))  # top 8 cm up: a 6 cm object lifted 2 cm
+    found = detect(lifted, DetectorSettings(region_low=(-0.3, -0.3), region_high=(0.3, 0.3), object_height=0.06))
+    assert found.position_table[2] == pytest.approx(0.05, abs=1e-3)
+
+
+@pytest.mark.parametrize("depth, reason", [
+    (scene(), RefusalReason.NO_OBJECT),
+    (scene((0.1, 0.1, 0.02, 0.02, 0.05), (-0.1, -0.1, 0.02, 0.02, 0.05)), RefusalReason.SEVERAL_OBJECTS),
+    (scene((0.5, 0.5, 0.02, 0.02, 0.05)), RefusalReason.NO_OBJECT),          # outside the region
+    (scene((0.0, 0.0, 0.003, 0.003, 0.05)), RefusalReason.NO_OBJECT),        # too small to be it
+    (scene((0.0, 0.0, 0.15, 0.15, 0.05)), RefusalReason.NO_OBJECT),          # too large
+    # The gripper (higher than any object) over part of the object: hidden, not half a centre.
+    (scene((0.0, 0.0, 0.025, 0.025, 0.06), (0.03, 0.0, 0.02, 0.04, 0.2)), RefusalReason.OCCLUDED),
+    # A finger going down next to the object, continuous with the robot above: not an object.
+    (scene((0.0, 0.0, 0.01, 0.01, 0.3), (0.0, 0.0, 0.02, 0.02, 0.07)), RefusalReason.OCCLUDED),
+])
+def test_holds_on_no_or_several_or_hidden_objects(depth, reason):
+    found = detect(depth)
+    assert isinstance(found, Refusal) and found.reason is reason, found
+
+
+def test_a_robot_part_far_from_the_object_does_not_matter():
+    found = detect(scene((0.1, 0.0, 0.025, 0.025, 0.06), (-0.15, 0.0, 0.03, 0.03, 0.4)))
+    assert isinstance(found, Detection), found
+    assert found.position_table[0] == pytest.approx(0.1, abs=1.5e-3)
+
+
+def test_debug_image_draws_detection_and_refusal():
+    color = np.zeros((K.height, K.width, 3), dtype=np.uint8)
+    found = detect(scene((0.0, 0.0, 0.025, 0.025, 0.06)))
+    drawn = draw_detection(color, found)
+    assert (drawn[..., 1] == 255).any() and color.max() == 0
+    refused = draw_detection(color, Refusal(RefusalReason.NO_OBJECT))
+    assert (refused[0, :, 0] == 255).all()
+
+
+# ----------------------------------------------------------------------------- tracking
+OBJECT = (0.1, -0.05, 0.025, 0.025, 0.06)      # a 5 cm square, 6 cm high
+GRIPPER_OVER_IT = (0.1, -0.05, 0.045, 0.045, 0.2)  # the gripper above it hides it whole
+
+
+def tcp_at(x, y, z):
+    pose = np.eye(4)
+    pose[:3, 3] = (x, y, z)
+    return pose
+
+
+class Frames:
+    """Feeds synthetic frames to a detector and a tracker, one stamp after the other."""
+
+    def __init__(self, **settings):
+        self.tracker = ObjectTracker(TrackerSettings(**settings), SETTINGS)
+        self.stamp = 0.0
+
+    def __call__(self, depth, tcp=None, width=None, dt=0.1):
+        self.stamp += dt
+        return self.tracker.update(detect(depth), self.stamp, depth, K, TABLE_FROM_OPTICAL, tcp, width)
+
+
+def test_size_is_measured_from_the_top_face():
+    found = detect(scene(OBJECT))
+    assert found.size == pytest.approx(0.05 * 2 / np.sqrt(3), rel=0.05)  # a square's equivalent width
+
+
+def test_a_hidden_object_keeps_its_last_position_for_a_bounded_time():
+    frames = Frames(hidden_timeout=1.0)
+    seen = frames(scene(OBJECT))
+    assert isinstance(seen, TrackedObject) and seen.state is TrackState.SEEN and seen.detection is not None
+    hidden = frames(scene(OBJECT, GRIPPER_OVER_IT))
+    assert isinstance(hidden, TrackedObject) and hidden.state is TrackState.HIDDEN, hidden
+    assert hidden.position_table == seen.position_table and hidden.last_seen == pytest.approx(0.1)
+    # Part of it showing beside a finger (the detector refuses it as OCCLUDED): still hidden.
+    finger = (0.1, -0.05, 0.01, 0.04, 0.2)
+    assert detect(scene(OBJECT, finger)).reason is RefusalReason.OCCLUDED
+    assert frames(scene(OBJECT, finger)).state is TrackState.HIDDEN
+    late = frames(scene(OBJECT, GRIPPER_OVER_IT), dt=1.0)
+    assert isinstance(late, Refusal) and "hidden_timeout" in late.detail
+    # The track is gone: hidden again, nothing is published until it is seen.
+    assert isinstance(frames(scene(OBJECT, GRIPPER_OVER_IT)), Refusal)
+    assert frames(scene(OBJECT)).state is TrackState.SEEN
+
+
+def test_an_object_that_has_gone_is_not_tracked():
+    frames = Frames()
+    frames(scene(OBJECT))
+    gone = frames(scene())  # bare table where it stood, nothing in front
+    assert isinstance(gone, Refusal) and gone.reason is RefusalReason.NO_OBJECT and "bare" in gone.detail
+    # Even with the gripper arriving later, the track stays dropped.
+    assert isinstance(frames(scene(GRIPPER_OVER_IT)), Refusal)
+
+
+def test_the_robot_elsewhere_does_not_keep_a_gone_object():
+    frames = Frames()
+    frames(scene(OBJECT))
+    gone = frames(scene((-0.15, 0.1, 0.03, 0.03, 0.4)))
+    assert isinstance(gone, Refusal)
+
+
+def test_two_candidates_hold_and_drop_the_track():
+    frames = Frames()
+    frames(scene(OBJECT))
+    two = frames(scene(OBJECT, (-0.1, 0.1, 0.02, 0.02, 0.05)))
+    assert isinstance(two, Refusal) and two.reason is RefusalReason.SEVERAL_OBJECTS
+    assert isinstance(frames(scene(OBJECT, GRIPPER_OVER_IT)), Refusal)
+
+
+def test_bad_frames_leave_the_track_alone():
+    frames = Frames()
+    frames(scene(OBJECT))
+    refusal = Refusal(RefusalReason.STALE, "old")
+    assert frames.tracker.update(refusal, 0.15) is refusal
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT)).state is TrackState.HIDDEN
+
+
+def test_an_object_in_the_hand_moves_with_the_tcp():
+    frames = Frames()
+    seen = frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08)
+    centre = np.array(seen.position_table)
+    size = seen.detection.size
+    # The gripper comes down around it, open: hidden, in place.
+    down = frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=tcp_at(*(centre + [0.0, 0.0, 0.01])), width=0.08)
+    assert down.state is TrackState.HIDDEN and down.position_table == seen.position_table
+    # The fingers close on it; while they are still closing the tcp may move: not yet taken.
+    tcp = tcp_at(*(centre + [0.0, 0.0, 0.01]))
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=tcp, width=size).state is TrackState.HIDDEN
+    closed = frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=tcp, width=size)
+    assert closed.state is TrackState.IN_HAND
+    np.testing.assert_allclose(closed.position_tcp, [0.0, 0.0, -0.01], atol=1e-9)  # published in the tcp frame
+    # It rises with the tcp, unseen, past hidden_timeout.
+    up = frames(scene(GRIPPER_OVER_IT), tcp=tcp_at(*(centre + [0.01, 0.0, 0.06])), width=size, dt=2.5)
+    assert up.state is TrackState.IN_HAND
+    np.testing.assert_allclose(up.position_table, centre + [0.01, 0.0, 0.05], atol=1e-9)
+    # The fingers open high above the table: let go; where it was held, the table is bare.
+    assert frames(scene(GRIPPER_OVER_IT), tcp=tcp_at(*(centre + [0.01, 0.0, 0.06])), width=0.08).state \
+        is TrackState.HIDDEN
+    dropped = frames(scene(), tcp=tcp_at(*(centre + [0.01, 0.0, 0.06])), width=0.08)
+    assert isinstance(dropped, Refusal) and "bare" in dropped.detail
+
+
+def test_an_object_that_slipped_out_of_closed_fingers_is_not_followed():
+    frames = Frames()
+    seen = frames(scene(OBJECT))
+    centre, size = np.array(seen.position_table), seen.detection.size
+    tcp = tcp_at(*(centre + [0.0, 0.0, 0.01]))
+    for _ in range(2):
+        held = frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=tcp, width=size)
+    assert held.state is TrackState.IN_HAND
+    # Fingers still closed to its width, but where it should hang the camera sees the table.
+    slipped = frames(scene(), tcp=tcp_at(*(centre + [0.0, 0.0, 0.08])), width=size)
+    assert isinstance(slipped, Refusal) and "not in the hand" in slipped.detail
+
+
+def test_fingers_closed_on_nothing_or_far_away_hold_nothing():
+    frames = Frames()
+    seen = frames(scene(OBJECT))
+    centre = np.array(seen.position_table)
+    # Closed all the way: it is not between the fingers.
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=tcp_at(*centre), width=0.0).state is TrackState.HIDDEN
+    # Closed to its width 10 cm away: not holding it.
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=tcp_at(*(centre + [0.1, 0, 0])),
+                  width=seen.detection.size).state is TrackState.HIDDEN
+
+
+def test_footprint_view_tells_in_front_from_bare_table():
+    found = detect(scene(OBJECT))
+    args = (K, TABLE_FROM_OPTICAL, SETTINGS, found.position_table, found.top_height, found.size, 0.01)
+    assert footprint_view(scene(OBJECT), *args)[:2] == (0.0, 0.0)
+    assert footprint_view(scene(OBJECT, GRIPPER_OVER_IT), *args)[:2] == (1.0, 0.0)
+    assert footprint_view(scene(), *args)[:2] == (0.0, 1.0)
+
+
+def test_debug_image_colours_say_where_the_position_comes_from():
+    color = np.zeros((K.height, K.width, 3), dtype=np.uint8)
+    frames = Frames()
+    frames(scene(OBJECT))
+    hidden = frames(scene(OBJECT, GRIPPER_OVER_IT))
+    drawn = draw_detection(color, hidden, K, TABLE_FROM_OPTICAL)
+    assert (drawn.reshape(-1, 3) == (255, 220, 0)).all(axis=1).any()
+
+
+# ----------------------------------------------------------------------------- components
+def test_label_components_matches_a_flood_fill():
+    rng = np.random.default_rng(3)
+    mask = rng.random((40, 50)) > 0.6
+    labels, count = label_components(mask)
+    assert ((labels > 0) == mask).all()
+    # Every 8-neighbour pair of set pixels shares a label, and the count is that of a flood fill.
+    seen = np.zeros_like(mask)
+    fills = 0
+    for start in zip(*np.nonzero(mask)):
+        if seen[start]:
+            continue
+        fills += 1
+        stack = [start]
+        seen[start] = True
+        while stack:
+            r, c = stack.pop()
+            assert labels[r, c] == labels[start]
+            for dr in (-1, 0, 1):
+                for dc in (-1, 0, 1):
+                    rr, cc = r + dr, c + dc
+                    if 0 <= rr < 40 and 0 <= cc < 50 and mask[rr, cc] and not seen[rr, cc]:
+                        seen[rr, cc] = True
+                        stack.append((rr, cc))
+    assert count == fills
+
+
+# ----------------------------------------------------------------------------- bad input
+def test_colour_decoding_and_unknown_encodings():
+    rgb = np.arange(2 * 3 * 3, dtype=np.uint8).reshape(2, 3, 3)
+    np.testing.assert_array_equal(decode_color("rgb8", 2, 3, 9, rgb.tobytes()), rgb)
+    np.testing.assert_array_equal(decode_color("bgr8", 2, 3, 9, rgb[:, :, ::-1].tobytes()), rgb)
+    padded = np.zeros((2, 12), dtype=np.uint8)  # rows padded to 12 bytes
+    padded[:, :9] = rgb.reshape(2, 9)
+    np.testing.assert_array_equal(decode_color("rgb8", 2, 3, 12, padded.tobytes()), rgb)
+    with pytest.raises(InputError) as error:
+        decode_color("yuv422", 2, 3, 6, bytes(12))
+    assert error.value.refusal.reason is RefusalReason.ENCODING and "yuv422" in str(error.value)
+    with pytest.raises(InputError) as error:
+        decode_depth("8UC1", 2, 3, 3, bytes(6))
+    assert error.value.refusal.reason is RefusalReason.ENCODING
+
+
+def test_image_data_that_does_not_fit_its_size_is_refused():
+    with pytest.raises(InputError) as error:
+        decode_color("rgb8", 480, 640, 1920, bytes(100))
+    assert error.value.refusal.reason is RefusalReason.BAD_IMAGE
+
+
+def test_depth_decoding_millimetres_and_metres():
+    mm = np.array([[0, 1000], [65535, 250]], dtype="<u2")
+    np.testing.assert_allclose(decode_depth("16UC1", 2, 2, 4, mm.tobytes()), [[0, 1.0], [65.535, 0.25]])
+    metres = np.array([[np.nan, 1.5], [np.inf, -1.0]], dtype="<f4")
+    np.testing.assert_allclose(decode_depth("32FC1", 2, 2, 8, metres.tobytes()), [[0, 1.5], [0, 0]])
+    big = np.array([[1000]], dtype=">u2")
+    assert decode_depth("16UC1", 1, 1, 2, big.tobytes(), big_endian=True)[0, 0] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("k, p", [([0.0] * 9, [0.0] * 12), ([], []), ([615.0, 0, 320, 0, 0.0, 240, 0, 0, 1], [])])
+def test_missing_or_zero_camera_info_is_refused(k, p):
+    with pytest.raises(InputError) as error:
+        intrinsics_from_camera_info(640, 480, k, p)
+    assert error.value.refusal.reason is RefusalReason.CAMERA_INFO
+
+
+def test_camera_info_uses_p_when_set():
+    k = [600.0, 0, 320, 0, 600.0, 240, 0, 0, 1]
+    p = [615.0, 0, 322.0, 0, 0, 616.0, 238.0, 0, 0, 0, 1, 0]
+    assert intrinsics_from_camera_info(640, 480, k, p) == Intrinsics(640, 480, 615.0, 616.0, 322.0, 238.0)
+    assert intrinsics_from_camera_info(640, 480, k, [0.0] * 12) == Intrinsics(640, 480, 600.0, 600.0, 320.0, 240.0)
+
+
+def frame_check(color=None, depth=None, intrinsics=K, stamp=10.0, now=10.05):
+    color = np.zeros((480, 640, 3), np.uint8) if color is None else color
+    depth = np.ones((480, 640), np.float32) if depth is None else depth
+    return check_frame(color, depth, intrinsics, stamp, now, timeout=0.3, min_valid_fraction=0.2)
+
+
+def test_a_good_frame_passes_the_checks():
+    assert frame_check() is None
+
+
+@pytest.mark.parametrize("kwargs, reason", [
+    (dict(depth=np.ones((240, 320), np.float32)), RefusalReason.SIZE_MISMATCH),
+    (dict(color=np.zeros((480, 848, 3), np.uint8)), RefusalReason.SIZE_MISMATCH),
+    (dict(intrinsics=Intrinsics(1280, 720, 900.0, 900.0, 640.0, 360.0)), RefusalReason.SIZE_MISMATCH),
+    (dict(depth=np.zeros((480, 640), np.float32)), RefusalReason.DEPTH_INVALID),
+    (dict(depth=decode_depth("32FC1", 480, 640, 2560, np.full((480, 640), np.nan, "<f4").tobytes())),
+     RefusalReason.DEPTH_INVALID),
+    (dict(stamp=9.0, now=10.0), RefusalReason.STALE),
+])
+def test_bad_frames_are_refused(kwargs, reason):
+    refusal = frame_check(**kwargs)
+    assert isinstance(refusal, Refusal) and refusal.reason is reason
+    assert str(refusal).startswith(reason.value)
