@@ -128,6 +128,18 @@ def test_a_hidden_object_keeps_its_last_position_for_a_bounded_time():
     assert frames(scene(OBJECT)).state is TrackState.SEEN
 
 
+def test_part_of_a_tracked_object_is_not_taken_for_it():
+    frames = Frames()
+    seen = frames(scene(OBJECT))
+    # Only its lower 4 cm show where it stands (a finger hides the top): the detector alone
+    # takes that for an object, the tracker for a part of the one it knows.
+    view = scene((0.1, -0.05, 0.025, 0.025, 0.04))
+    assert isinstance(detect(view), Detection)
+    part = frames(view)
+    assert isinstance(part, TrackedObject) and part.state is TrackState.HIDDEN, part
+    assert part.position_table == seen.position_table
+
+
 def test_an_object_that_has_gone_is_not_tracked():
     frames = Frames()
     frames(scene(OBJECT))

@@ -259,7 +259,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--episodes", type=int, default=20)
     parser.add_argument("--noise", type=float, default=0.002, help="depth noise (1/m) of the second error figure")
     parser.add_argument("--seed", type=int, default=700000)
-    parser.add_argument("--port", type=int, default=11421)
+    parser.add_argument("--port", type=int, default=11431, help="ROS master port (reach; grasp +1), apart from "
+                        "bench_ros.py (11411) and bench_lockstep.py (11421): benches may run side by side")
     parser.add_argument("--skip-ros", action="store_true", help="only the in-process part")
     parser.add_argument("--quick", action="store_true", help="20 placements, 3 episodes: a smoke run")
     parser.add_argument("--results", type=Path, default=RESULTS_DIR)

@@ -84,6 +84,8 @@ class DetectorNodeParams:
     min_grasp_fraction: float
     closing_tolerance: float
     closing_axis: List[float]
+    gate_height: float
+    gate_size: float
     tcp_frame: str
     joint_states_topic: str
     track_state_topic: str
@@ -121,7 +123,8 @@ def tracker_settings_from(params: DetectorNodeParams) -> TrackerSettings:
                            max_table_fraction=params.max_table_fraction, front_tolerance=params.front_tolerance,
                            grasp_radius=params.grasp_radius, grasp_width_margin=params.grasp_width_margin,
                            min_grasp_fraction=params.min_grasp_fraction, closing_tolerance=params.closing_tolerance,
-                           closing_axis=tuple(params.closing_axis))
+                           closing_axis=tuple(params.closing_axis), gate_height=params.gate_height,
+                           gate_size=params.gate_size)
 
 
 class DetectorNode:

@@ -476,6 +476,9 @@ class TrackerSettings:
         tcp may still move relative to it).
     :param closing_axis: the direction (tcp frame) the fingers close along. Closing fingers push
         the object to their middle, so in the hand its offset along this axis is 0.
+    :param gate_height: m; while an object is tracked, a detection whose top differs from its
+        standing top height by more than this is a part of it (a finger hides the rest): hidden.
+    :param gate_size: likewise for a top face width that differs by more than this fraction.
     """
 
     hidden_timeout: float = 2.0
@@ -487,6 +490,8 @@ class TrackerSettings:
     min_grasp_fraction: float = 0.5
     closing_tolerance: float = 0.002
     closing_axis: Tuple[float, float, float] = (0.0, 1.0, 0.0)
+    gate_height: float = 0.01
+    gate_size: float = 0.3
 
 
 def footprint_view(depth: np.ndarray, intrinsics: Intrinsics, table_from_optical: np.ndarray,
@@ -608,6 +613,10 @@ class ObjectTracker:
             and table_from_optical is not None else None
         if self._in_tcp is not None:
             return self._follow_hand(result, stamp, look, tcp, gripper_width)
+        if isinstance(result, Detection) and self._position is not None:
+            partial = self._partial(result)
+            if partial is not None:
+                result = Refusal(RefusalReason.OCCLUDED, partial)
         if isinstance(result, Detection):
             self._position = np.array(result.position_table, dtype=np.float64)
             self._top_height, self._size, self._last_seen = result.top_height, result.size, stamp
@@ -677,6 +686,20 @@ class ObjectTracker:
             self._in_tcp = (np.linalg.inv(tcp) @ np.append(position, 1.0))[:3]
         self._top_height = self._rest[1] + float(position[2] - self._rest[0])
         self._position = position
+
+    def _partial(self, detection: Detection) -> Optional[str]:
+        """Why a detection cannot be the whole tracked object (its top lower or higher, or its
+        face narrower or wider, than the object's when it was last seen standing: a part of it
+        beside a finger, or a finger tip), or None."""
+        s = self.settings
+        rest_top = self._rest[1]
+        if abs(detection.top_height - rest_top) > s.gate_height:
+            return (f"a piece {detection.top_height * 100:.1f} cm high where the object stands "
+                    f"{rest_top * 100:.1f} cm: part of it (gate_height {s.gate_height:g} m)")
+        if self._size > 0.0 and abs(detection.size / self._size - 1.0) > s.gate_size:
+            return (f"a piece {detection.size * 100:.1f} cm wide where the object is {self._size * 100:.1f} cm: "
+                    f"part of it (gate_size {s.gate_size:g})")
+        return None
 
     def _gone(self, look) -> Optional[str]:
         """Why the camera says the object is not where it is believed to be, or None."""
