@@ -282,11 +282,12 @@ def test_ppo_divisibility_check(tmp_path, capsys):
 
 
 def test_shipped_hyperparameters_pass_their_checks():
-    shipped = [path.stem.split("_") for path in (package_root() / "config").glob("*_*.yaml")
+    # <algo>_<task>.yaml, and variants such as ppo_reach_finetune.yaml
+    shipped = [(path.stem.split("_"), path) for path in (package_root() / "config").glob("*_*.yaml")
                if path.stem.split("_")[0] in ("ppo", "sac", "td3", "tqc")]
-    assert ["ppo", "reach"] in shipped
-    for algo, task in shipped:
-        hyper = load_hyperparameters(algo, task)
+    assert ["ppo", "reach"] in [parts for parts, _ in shipped]
+    for (algo, task, *_variant), path in shipped:
+        hyper = load_hyperparameters(algo, task, str(path))
         check_hyperparameters(algo, hyper, hyper.n_envs)
         assert hyper.n_timesteps > 0
 
