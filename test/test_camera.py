@@ -5,10 +5,10 @@ import pybullet as p
 import pytest
 
 from fr5_rl.config import load_env_config, load_robot_spec, load_yaml
-from fr5_rl.ros.camera_node import chain_transform
 from fr5_rl.runtime.detection import Detection, DetectorSettings, ObjectDetector
 from fr5_rl.runtime.pinhole import Intrinsics, IntrinsicsError
 from fr5_rl.sim.camera import SimulatedCamera, depth_to_millimetres
+from fr5_rl.transforms import load_static_transforms, transform_in
 
 CAMERA = load_yaml("camera")
 K = Intrinsics(CAMERA["width"], CAMERA["height"], CAMERA["fx"], CAMERA["fy"], CAMERA["cx"], CAMERA["cy"])
@@ -41,7 +41,7 @@ def test_pinhole_matches_pybullets_own_camera_matrices():
     """The detector's pinhole model and the camera the simulator renders with agree with
     PyBullet's view/projection helpers (fx = fy, principal point at the image centre, the case
     those helpers can express) to 1e-3 px (PyBullet's matrices are float32), all over the view."""
-    base_from_optical = chain_transform("base_link", CAMERA["frame_id"])
+    base_from_optical = transform_in(load_static_transforms(), "base_link", CAMERA["frame_id"])
     width, height, f = K.width, K.height, K.fx
     centred = Intrinsics(width, height, f, f, (width - 1) / 2.0, (height - 1) / 2.0)
     rng = np.random.default_rng(4)
@@ -73,8 +73,8 @@ def test_unusable_intrinsics_are_refused(fx, width):
 
 def test_optical_frame_follows_rep_103():
     """z forward = camera_link x, x right = camera_link -y, y down = camera_link -z."""
-    link = chain_transform("base_link", "camera_link")
-    optical = chain_transform("base_link", CAMERA["frame_id"])
+    link = transform_in(load_static_transforms(), "base_link", "camera_link")
+    optical = transform_in(load_static_transforms(), "base_link", CAMERA["frame_id"])
     np.testing.assert_allclose(optical[:3, 3], link[:3, 3], atol=1e-9)
     np.testing.assert_allclose(optical[:3, 2], link[:3, 0], atol=1e-6)
     np.testing.assert_allclose(optical[:3, 0], -link[:3, 1], atol=1e-6)
@@ -95,7 +95,7 @@ def test_depth_in_millimetres_with_zero_for_no_data():
 def camera():
     spec = load_robot_spec()
     names = list(spec.joint_names) + list(spec.finger_joint_names)
-    pose = chain_transform("base_link", CAMERA["frame_id"])
+    pose = transform_in(load_static_transforms(), "base_link", CAMERA["frame_id"])
     cam = SimulatedCamera(load_env_config(), names, pose, K.opengl_projection(CAMERA["near"], CAMERA["far"]),
                           K.width, K.height, CAMERA["near"], CAMERA["far"], "tiny")
     cam.set_joints(dict(zip(spec.joint_names, spec.home_joint_positions)))
@@ -124,3 +124,19 @@ def test_render_then_detect_finds_the_true_centre(camera):
         found = detector.detect(depth_to_millimetres(depth).astype(np.float32) * 0.001, K, pose, rgb)
         assert isinstance(found, Detection), found
         assert np.linalg.norm(np.subtract(found.position_table, position)) < 0.003, (found, position)
+
+
+def test_transform_in_chains_configured_entries_and_refuses_unconnected_frames():
+    from fr5_rl.config import ConfigError
+    from fr5_rl.transforms import matrix_from_xyz_rpy
+
+    first = matrix_from_xyz_rpy([1.0, 0.0, 0.0], [0.0, 0.0, 1.5707963])
+    second = matrix_from_xyz_rpy([0.0, 2.0, 0.0], [0.0, 0.0, 0.0])
+    entries = [{"parent": "a", "child": "b", "matrix": first}, {"parent": "b", "child": "c", "matrix": second}]
+    assert np.allclose(transform_in(entries, "a", "b"), first)
+    chained = transform_in(entries, "a", "c")
+    assert np.allclose(chained, first @ second)
+    assert np.allclose(chained[:3, 3], [-1.0, 0.0, 0.0], atol=1e-6)  # (0, 2) turned by 90 deg, then +x 1
+    assert np.allclose(transform_in(entries, "c", "c"), np.eye(4))
+    with pytest.raises(ConfigError, match="does not connect"):
+        transform_in(entries, "c", "a")

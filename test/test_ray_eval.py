@@ -13,7 +13,6 @@ from fr5_rl.cli import evaluate
 from fr5_rl.training.ray_eval import seed_slices
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
-MB = 1024 * 1024
 # Two slices of 4: the expert's episode of seed 3000004, the first of the second slice, ends
 # 1e-5 m apart in a fresh environment and after seed 3000003 (see fr5_rl.training.ray_eval), so
 # the comparison also checks that a slice replays the serial run's history.
@@ -27,21 +26,6 @@ def test_seed_slices_cover_every_seed_once_in_order():
         assert [s for part in slices for s in part] == seeds
         assert len(slices) == min(parts, len(seeds)) and all(slices)
         assert max(map(len, slices)) - min(map(len, slices)) <= 1
-
-
-@pytest.fixture(scope="module")
-def cluster():
-    import ray
-    from ray.cluster_utils import Cluster
-
-    node_args = {"num_cpus": 1, "object_store_memory": 80 * MB}
-    cluster = Cluster(initialize_head=True, head_node_args={**node_args, "include_dashboard": False})
-    cluster.add_node(**node_args)
-    cluster.wait_for_nodes()
-    ray.init(address=cluster.address, logging_level="warning")
-    yield cluster
-    ray.shutdown()
-    cluster.shutdown()
 
 
 def read_csv(path: Path) -> list:

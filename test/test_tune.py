@@ -150,20 +150,7 @@ def test_a_trial_bigger_than_every_node_is_refused(tmp_path, capsys, cluster):
 
 
 # ----------------------------------------------------------------------------- on a 2-node cluster
-@pytest.fixture(scope="module")
-def cluster():
-    """A head and a worker node on this machine, one CPU each; this process is the driver."""
-    import ray
-    from ray.cluster_utils import Cluster
-
-    node_args = {"num_cpus": 1, "object_store_memory": 80 * MB}
-    cluster = Cluster(initialize_head=True, head_node_args={**node_args, "include_dashboard": False})
-    cluster.add_node(**node_args)
-    cluster.wait_for_nodes()
-    ray.init(address=cluster.address, logging_level="warning")
-    yield cluster
-    ray.shutdown()
-    cluster.shutdown()
+# The `cluster` fixture (a head and a worker node, one CPU each) is test/conftest.py's.
 
 
 def node_ids():

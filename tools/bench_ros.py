@@ -23,7 +23,7 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from benchlib import AT_LEAST, AT_MOST, REPO, RESULTS_DIR, latency_ms, relative_path, update_summary, verdict, write_result
+from benchlib import AT_LEAST, AT_MOST, REPO, RESULTS_DIR, join_ros, latency_ms, relative_path, update_summary, verdict, write_result
 
 TARGETS = {"compute_latency_p99_ms": 3.0, "period_jitter_p99_ms": 2.0, "parity_points": 5.0, "busy_success_rate": 0.95}
 
@@ -75,14 +75,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     from std_msgs.msg import Float64MultiArray
 
     samples = []
-    deadline = time.time() + 30
-    while time.time() < deadline:
-        try:
-            rospy.get_master().getPid()
-            break
-        except Exception:
-            time.sleep(0.5)
-    rospy.init_node("bench_ros", anonymous=True, disable_signals=True)
+    join_ros("bench_ros")
     rospy.Subscriber("/fr5_policy/timing", Float64MultiArray, lambda m: samples.append(tuple(m.data)), queue_size=1000)
     output = []
     for line in launch.stdout:

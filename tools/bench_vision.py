@@ -29,7 +29,7 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from benchlib import AT_LEAST, AT_MOST, RESULTS_DIR, latency_ms, machine_info, update_summary, verdict, write_result
+from benchlib import AT_LEAST, AT_MOST, RESULTS_DIR, join_ros, latency_ms, machine_info, update_summary, verdict, write_result
 
 TARGETS = {"detection_p95_mm": 5.0, "latency_slack_ms": 10.0, "reach_success": 0.95, "grasp_success": 0.85,
            "camera_hz": 10.0, "joint_states_hz": 100.0}
@@ -46,15 +46,15 @@ def offline(placements: int, noise: float, renderers: List[str], frames: int, pr
     """Renderer timing and detection error, in this process (no ROS)."""
     from fr5_rl.config import load_env_config, load_yaml
     from fr5_rl.envs import FR5Env
-    from fr5_rl.ros.camera_node import chain_transform
     from fr5_rl.runtime.detection import Detection, DetectorSettings, ObjectDetector
     from fr5_rl.runtime.pinhole import Intrinsics
     from fr5_rl.sim.camera import SimulatedCamera, depth_to_millimetres
+    from fr5_rl.transforms import load_static_transforms, transform_in
 
     camera_cfg, detector_cfg, env_cfg = camera_config(profile), load_yaml("detector"), load_env_config()
     intrinsics = Intrinsics(camera_cfg["width"], camera_cfg["height"], camera_cfg["fx"], camera_cfg["fy"],
                             camera_cfg["cx"], camera_cfg["cy"])
-    pose = chain_transform(camera_cfg["base_frame"], camera_cfg["frame_id"])
+    pose = transform_in(load_static_transforms(), camera_cfg["base_frame"], camera_cfg["frame_id"])
     env = FR5Env("reach")
     names = list(env.robot_spec.joint_names) + list(env.robot_spec.finger_joint_names)
     result: Dict[str, Any] = {"resolution": [intrinsics.width, intrinsics.height], "renderers": {}}
@@ -144,15 +144,7 @@ def closed_loop(model: str, task: str, episodes: int, seed: int, port: int, prof
     from sensor_msgs.msg import CameraInfo, JointState
     from std_msgs.msg import Float64MultiArray, String
 
-    deadline = time.time() + 30
-    while time.time() < deadline:
-        try:
-            rospy.get_master().getPid()
-            break
-        except Exception:
-            time.sleep(0.5)
-    if not rospy.core.is_initialized():
-        rospy.init_node("bench_vision", anonymous=True, disable_signals=True)
+    join_ros("bench_vision")
     lock = threading.Lock()
     arrivals: Dict[str, List[float]] = {"camera": [], "joint_states": [], "command": [], "target": []}
     pending: List[float] = []  # image stamps of detections no command has used yet

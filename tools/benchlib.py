@@ -130,6 +130,23 @@ def pass_fail(result: Mapping[str, Any]) -> str:
     return "PASS" if result["met"] else "FAIL"
 
 
+# ----------------------------------------------------------------------------- ROS
+def join_ros(node_name: str, timeout: float = 30.0) -> None:
+    """Wait (up to ``timeout`` s) for the ROS master a bench's roslaunch is starting, then make
+    this process a ROS node (anonymous, no signal handlers) unless it already is one."""
+    import rospy
+
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        try:
+            rospy.get_master().getPid()
+            break
+        except Exception:  # the master is not up yet (connection refused, timeouts)
+            time.sleep(0.5)
+    if not rospy.core.is_initialized():
+        rospy.init_node(node_name, anonymous=True, disable_signals=True)
+
+
 # ----------------------------------------------------------------------------- machine
 def machine_info() -> Dict[str, Any]:
     """:func:`fr5_rl.runtime.bundle.machine_description` plus the usable cores, the load when

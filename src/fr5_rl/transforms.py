@@ -72,8 +72,15 @@ def load_static_transforms(path: str | Path = "static_transforms") -> List[Dict]
 
 
 def transform_in(entries: List[Dict], parent: str, child: str) -> np.ndarray:
-    """The configured transform parent <- child (4x4), or ConfigError if it is not listed."""
-    for entry in entries:
-        if entry["parent"] == parent and entry["child"] == child:
-            return entry["matrix"]
-    raise ConfigError(f"config/static_transforms.yaml has no transform {parent} -> {child}")
+    """The configured transform parent <- child (4x4), chained up the tree from ``child``
+    (e.g. base_link <- camera_link <- camera_color_optical_frame), or ConfigError if the
+    entries do not connect them."""
+    by_child = {entry["child"]: entry for entry in entries}
+    matrix, frame = np.eye(4), child
+    while frame != parent:
+        entry = by_child.get(frame)
+        if entry is None:
+            raise ConfigError(f"config/static_transforms.yaml does not connect {child} to {parent}")
+        matrix = entry["matrix"] @ matrix
+        frame = entry["parent"]
+    return matrix

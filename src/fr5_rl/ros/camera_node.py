@@ -37,7 +37,7 @@ from visualization_msgs.msg import Marker
 from ..config import ConfigError, load_env_config, load_robot_spec
 from ..runtime.pinhole import Intrinsics, IntrinsicsError
 from ..sim.camera import RENDERERS, SimulatedCamera, depth_to_millimetres
-from ..transforms import load_static_transforms
+from ..transforms import load_static_transforms, transform_in
 from .images import camera_info_message, image_message
 from .params import exit_if_help_asked, node_parameters
 
@@ -67,29 +67,19 @@ class CameraNodeParams:
     camera_info_topic: str
     depth_camera_info_topic: str
 
+    def intrinsics(self) -> Intrinsics:
+        """The pinhole model these parameters describe (raises IntrinsicsError if invalid)."""
+        return Intrinsics(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
+
     def check(self, source: str) -> None:
         if self.renderer not in RENDERERS:
             raise ConfigError(f"{source}: 'renderer' must be one of {RENDERERS}, got {self.renderer!r}")
         if self.rate <= 0 or not 0 < self.near < self.far or self.depth_noise < 0:
             raise ConfigError(f"{source}: needs rate > 0, 0 < near < far, depth_noise >= 0")
         try:
-            Intrinsics(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
+            self.intrinsics()
         except IntrinsicsError as error:
             raise ConfigError(f"{source}: {error}") from None
-
-
-def chain_transform(parent: str, child: str) -> np.ndarray:
-    """``child``'s pose in ``parent`` (4x4) by chaining config/static_transforms.yaml entries up
-    from ``child``."""
-    entries = {entry["child"]: entry for entry in load_static_transforms()}
-    matrix, frame = np.eye(4), child
-    while frame != parent:
-        entry = entries.get(frame)
-        if entry is None:
-            raise ConfigError(f"config/static_transforms.yaml does not connect {child} to {parent}")
-        matrix = entry["matrix"] @ matrix
-        frame = entry["parent"]
-    return matrix
 
 
 class CameraNode:
@@ -97,10 +87,10 @@ class CameraNode:
 
     def __init__(self) -> None:
         self.params = params = node_parameters(CameraNodeParams, "camera")
-        self.intrinsics = Intrinsics(params.width, params.height, params.fx, params.fy, params.cx, params.cy)
+        self.intrinsics = params.intrinsics()
         spec = load_robot_spec()
         arguments = (load_env_config(), list(spec.joint_names) + list(spec.finger_joint_names),
-                     chain_transform(params.base_frame, params.frame_id),
+                     transform_in(load_static_transforms(), params.base_frame, params.frame_id),
                      self.intrinsics.opengl_projection(params.near, params.far),
                      params.width, params.height, params.near, params.far)
         try:

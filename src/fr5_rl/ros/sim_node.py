@@ -398,8 +398,7 @@ class SimulatorNode:
         """The joint state and, for the simulated camera, the object's true pose, stamped alike."""
         self.joint_pub.publish(self._joint_state_message(stamp))
         if self.object_pub is not None:
-            marker = scene_markers(self.env.scene(), self.env.object_pose(), (), stamp).markers[1]
-            self.object_pub.publish(marker)
+            self.object_pub.publish(object_marker(self.env.scene(), self.env.object_pose(), stamp))
 
     def _camera_message(self, stamp: rospy.Time) -> PoseStamped:
         """The object's pose as the camera sees it: in ``~camera_frame``, with optional noise."""
@@ -438,6 +437,17 @@ def _marker(kind: int, namespace: str, rgba: Sequence[float], frame_id: str, sta
     return marker
 
 
+def object_marker(scene: SceneDescription, object_pose: Pose, stamp: rospy.Time) -> Marker:
+    """The object where it is now: shape, size (m) and pose in ``scene.frame_id``."""
+    kind = Marker.CYLINDER if scene.object_shape == "cylinder" else Marker.CUBE
+    obj = _marker(kind, "object", (0.85, 0.2, 0.15, 1.0), scene.frame_id, stamp)
+    obj.scale.x, obj.scale.y, obj.scale.z = scene.object_size
+    obj.pose.position.x, obj.pose.position.y, obj.pose.position.z = object_pose.position
+    orientation = obj.pose.orientation
+    orientation.x, orientation.y, orientation.z, orientation.w = object_pose.quaternion
+    return obj
+
+
 def scene_markers(scene: SceneDescription, object_pose: Pose, tcp_path: Iterable[Tuple[float, float, float]],
                   stamp: rospy.Time) -> MarkerArray:
     """rviz markers: the table, the object where it is now, and the tcp's recent path."""
@@ -446,13 +456,7 @@ def scene_markers(scene: SceneDescription, object_pose: Pose, tcp_path: Iterable
     table.scale.x, table.scale.y, table.scale.z = scene.table_size
     table.pose.position.x, table.pose.position.y, table.pose.position.z = scene.table_center
 
-    kind = Marker.CYLINDER if scene.object_shape == "cylinder" else Marker.CUBE
-    obj = _marker(kind, "object", (0.85, 0.2, 0.15, 1.0), frame, stamp)
-    obj.scale.x, obj.scale.y, obj.scale.z = scene.object_size
-    obj.pose.position.x, obj.pose.position.y, obj.pose.position.z = object_pose.position
-    orientation = obj.pose.orientation
-    orientation.x, orientation.y, orientation.z, orientation.w = object_pose.quaternion
-
+    obj = object_marker(scene, object_pose, stamp)
     path = _marker(Marker.LINE_STRIP, "tcp_path", (0.1, 0.5, 1.0, 0.9), frame, stamp)
     path.scale.x = 0.004
     path.points = [Point(x=x, y=y, z=z) for x, y, z in tcp_path]

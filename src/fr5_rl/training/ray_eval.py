@@ -19,9 +19,9 @@ import tempfile
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
-from ..config import ConfigError
 from ..runtime.bundle import required_files
 from .evaluation import run_episodes
+from .tune import import_ray
 
 
 def seed_slices(seeds: Sequence[int], parts: int) -> List[List[int]]:
@@ -83,11 +83,7 @@ def run_episodes_on_ray(task: str, env_overrides: Dict[str, Any], seeds: Sequenc
     :returns: the records sorted by seed, and the node id of each task.
     :raises ConfigError: Ray is not installed.
     """
-    try:
-        import ray
-    except ImportError as error:
-        raise ConfigError(f"Ray is not installed ({error}); run `make setup` (it installs the pinned ray[tune] "
-                          "from requirements.txt) and source env.sh") from None
+    ray, _ = import_ray()
     started = False
     if not ray.is_initialized():
         local = address is None and not os.environ.get("RAY_ADDRESS")
