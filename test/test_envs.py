@@ -649,3 +649,29 @@ def test_forward_kinematics_matches_pybullet():
         np.testing.assert_allclose(tcp_position - flange_position, 0.17 * flange_rotation[:, 2], atol=1e-12)
     finally:
         env.close()
+
+
+def test_plain_episode_share_draws_some_episodes_without_randomisation():
+    """randomisation.plain_episode_share: that share of episodes runs with none of the
+    perturbations (here: two steps of latency and noise), the rest with all of them."""
+    from fr5_rl.envs import FR5Env
+
+    perturbed = {"enabled": True, "action_latency_steps": [2, 2], "observation_noise_std": 0.004}
+    env = FR5Env(task="reach", config={"randomisation": {**perturbed, "plain_episode_share": 0.5}})
+    latencies = []
+    for seed in range(60):
+        env.reset(seed=seed)
+        latencies.append((env._latency_steps, env._obs_noise_std))
+    env.close()
+    assert set(latencies) == {(0, 0.0), (2, 0.004)}
+    plain = sum(latency == (0, 0.0) for latency in latencies)
+    assert 15 <= plain <= 45, plain  # binomial(60, 0.5): outside this 1 time in 10^4
+
+    always = FR5Env(task="reach", config={"randomisation": perturbed})
+    always.reset(seed=0)
+    assert always._latency_steps == 2
+    always.close()
+    from fr5_rl.config import ConfigError
+
+    with pytest.raises(ConfigError, match="plain_episode_share"):
+        FR5Env(task="reach", config={"randomisation": {**perturbed, "plain_episode_share": 1.0}})

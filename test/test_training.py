@@ -476,6 +476,47 @@ def test_init_from_continues_the_given_model(ppo_run, tmp_path):
     assert max(moved) < 0.5  # ... a little, from the source's weights (a fresh init is far away)
 
 
+def test_init_from_applies_this_runs_settings_and_warms_the_critic_up(ppo_run, tmp_path):
+    """--init-from with a hyperparameter file: the file's training settings (learning rate,
+    n_steps, clip range) replace the saved model's; with critic_warmup, the actor's weights stay
+    exactly as they were while only the value function learns, then the actor trains too."""
+    import torch
+    from stable_baselines3 import PPO
+
+    source = ppo_run / "checkpoints" / "latest"
+    hyper = write(tmp_path / "fine.yaml", FAST_PPO.replace("n_steps: 256", "n_steps: 128")
+                  .replace("learning_rate: 0.0003", "learning_rate: 0.00002")
+                  + "  clip_range: 0.05\n" + "critic_warmup: {steps: 256, learning_rate: 0.001}\n")
+
+    def fine_tune(timesteps: int) -> dict:
+        run_dir = tmp_path / f"fine_{timesteps}"
+        code = train.main(["--init-from", str(source), "--hyperparams", str(hyper), "--timesteps", str(timesteps),
+                           "--n-envs", "1", "--no-subprocess", "--eval-freq", "100000", "--no-progress",
+                           "--run-dir", str(run_dir)])
+        assert code == 0
+        return PPO.load(run_dir / "final" / "model.zip", device="cpu")
+
+    before = PPO.load(source / "model.zip", device="cpu").policy.state_dict()
+    held = fine_tune(256)  # two rollouts of 128: both inside the warm-up
+    assert (held.learning_rate, held.n_steps, held.clip_range(1.0)) == (0.00002, 128, 0.05)
+    state = held.policy.state_dict()
+    actor = [k for k in before if k.startswith(("mlp_extractor.policy_net", "action_net", "log_std"))]
+    critic = [k for k in before if k.startswith(("mlp_extractor.value_net", "value_net"))]
+    assert actor and critic
+    for key in actor:
+        assert torch.equal(state[key], before[key]), f"{key} moved during the critic warm-up"
+    assert max(float((state[k] - before[k]).abs().max()) for k in critic) > 0.0
+    released = fine_tune(768).policy.state_dict()  # the last rollouts train the actor as well
+    assert max(float((released[k] - before[k]).abs().max()) for k in actor) > 0.0
+
+
+def test_critic_warmup_settings_are_checked(tmp_path):
+    with pytest.raises(ConfigError, match="critic_warmup.steps"):
+        load_hyperparameters("ppo", "reach", str(write(tmp_path / "a.yaml", FAST_PPO + "critic_warmup: {steps: 0, learning_rate: 0.001}\n")))
+    with pytest.raises(ConfigError, match="critic_warmup"):
+        load_hyperparameters("ppo", "reach", str(write(tmp_path / "b.yaml", FAST_PPO + "critic_warmup: {steps: 100}\n")))
+
+
 def test_init_from_refuses_another_task(ppo_run, tmp_path, capsys):
     code = train.main(["--task", "grasp", "--init-from", str(ppo_run / "checkpoints" / "latest"), "--timesteps",
                        "256", "--n-envs", "1", "--no-subprocess", "--no-progress", "--run-dir", str(tmp_path / "r")])

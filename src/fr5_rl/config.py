@@ -199,6 +199,9 @@ def validate_env_config(cfg: Mapping[str, Any], robot: RobotSpec) -> None:
         if not 0.0 <= low <= high <= control_dt:
             raise ConfigError(f"randomisation.{key}: [{low}, {high}] must satisfy 0 <= low <= high <= control_dt "
                               f"({control_dt} s): it is a time inside one control period")
+    share = float(randomisation.get("plain_episode_share", 0.0))
+    if not 0.0 <= share < 1.0:
+        raise ConfigError(f"randomisation.plain_episode_share: {share} must be in [0, 1)")
     max_step = float(cfg["action"]["max_joint_step"])
     allowed = float(np.min(robot.velocity_limits)) * control_dt
     if not 0.0 < max_step <= allowed + 1e-12:
@@ -295,10 +298,13 @@ def typed(cls: Type[T], data: Any, source: str, path: str = "") -> T:
     if unknown:
         raise ConfigError(f"{source}: unknown key '{_join(path, unknown[0])}'; known keys"
                           f"{' under ' + repr(path) if path else ''}: {', '.join(names)}")
-    missing = [name for name in names if name not in data]
+    optional = {field.name for field in dataclasses.fields(cls)
+                if field.default is not dataclasses.MISSING or field.default_factory is not dataclasses.MISSING}
+    missing = [name for name in names if name not in data and name not in optional]
     if missing:
         raise ConfigError(f"{source}: missing key '{_join(path, missing[0])}'")
-    instance = cls(**{name: _coerce(hints[name], data[name], source, _join(path, name)) for name in names})
+    instance = cls(**{name: _coerce(hints[name], data[name], source, _join(path, name))
+                      for name in names if name in data})
     check = getattr(instance, "check", None)
     if check is not None:
         check(source)
@@ -427,6 +433,19 @@ class NormalizeSettings:
 
 
 @dataclass(frozen=True)
+class CriticWarmupSettings:
+    """``critic_warmup`` of a hyperparameter file: for the first ``steps`` environment steps only
+    the value function trains (the actor held), at ``learning_rate``, so that the first policy
+    updates follow advantages of a critic that fits the actor's returns, not noise."""
+
+    steps: int
+    learning_rate: float
+
+    def check(self, source: str) -> None:
+        _positive(source, **{"critic_warmup.steps": self.steps, "critic_warmup.learning_rate": self.learning_rate})
+
+
+@dataclass(frozen=True)
 class Hyperparameters:
     """``config/<algo>_<task>.yaml`` (rl-zoo style): everything a training run is made of.
 
@@ -439,9 +458,12 @@ class Hyperparameters:
     normalize: NormalizeSettings
     env: Dict[str, Any]
     algo_kwargs: Dict[str, Any]
+    # Fine-tuning (train.py --init-from) a model whose critic never learnt (e.g. DAgger's).
+    critic_warmup: Optional[CriticWarmupSettings] = None
 
     def check(self, source: str) -> None:
         _positive(source, n_timesteps=self.n_timesteps, n_envs=self.n_envs)
+
         try:
             load_env_config(self.env)
         except ConfigError as error:

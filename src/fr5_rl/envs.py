@@ -470,6 +470,9 @@ class FR5Env(gym.Env):
         """Object size/mass/friction, joint damping, latency, observation noise (if enabled)."""
         obj, rnd = self._object_cfg, self.cfg["randomisation"]
         on = bool(rnd["enabled"])
+        share = float(rnd.get("plain_episode_share", 0.0))
+        if on and share > 0.0:  # drawn only when asked for: other configurations keep their episodes
+            on = bool(rng.uniform() >= share)
         size = rng.uniform(*rnd["object_size_scale"]) if on else 1.0
         mass = float(obj["mass"]) * (rng.uniform(*rnd["object_mass_scale"]) if on else 1.0)
         friction = float(obj["lateral_friction"]) * (rng.uniform(*rnd["friction_scale"]) if on else 1.0)

@@ -40,7 +40,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--target-success", type=float, default=0.95,
                         help="evaluation success rate that counts as solved, for time to solve (0.95)")
     parser.add_argument("--stop-at-success", action="store_true", help="stop once solved")
-    parser.add_argument("--no-subprocess", action="store_true", help="DummyVecEnv instead of SubprocVecEnv")
+    parser.add_argument("--no-subprocess", action="store_true", help="all environments in the trainer's process")
+    parser.add_argument("--processes", type=int, default=None, metavar="N",
+                        help="worker processes the environments are spread over (default: one per available "
+                             "core, at most n_envs); speed only, results are the same")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--torch-threads", type=int, default=1, help="(1)")
     return parser

@@ -7,7 +7,13 @@ from pathlib import Path
 from typing import Any, Dict, List
 
 import numpy as np
+import torch
 from stable_baselines3.common.callbacks import BaseCallback
+
+try:
+    from stable_baselines3.common.utils import FloatSchedule
+except ImportError:  # stable-baselines3 < 2.6 (the Python 3.8 pin)
+    from stable_baselines3.common.utils import get_schedule_fn as FloatSchedule
 
 from ..runtime.bundle import save_model_dir, write_json_atomic
 
@@ -129,3 +135,52 @@ class SolveTimer(BaseCallback):
                            {**self.meta, "num_timesteps": int(self.num_timesteps)})
         write_json_atomic(self.run_dir / "summary.json", summary)
         return not (self.stop_at_success and "time_to_solve_s" in summary)
+
+
+class CriticWarmup(BaseCallback):
+    """For the first ``steps`` environment steps of a fine-tuning run, only the critic learns.
+
+    A model imitated from an expert (DAgger) has a trained actor and an untrained value network.
+    PPO's first updates would follow advantages computed from that untrained critic, noise that
+    can undo the imitation before reward has had a say. Holding the actor's parameters
+    (``requires_grad`` off: Adam skips parameters without gradients) until the critic has fitted
+    a few rollouts avoids that. Updates on rollouts that end within ``steps`` train only the
+    critic; later ones train both, at the run's own learning rate again.
+
+    :param steps: environment steps of critic-only training.
+    :param learning_rate: the (constant) learning rate while the actor is held: a fresh critic
+        needs larger steps than the fine-tuning of a good actor.
+    """
+
+    def __init__(self, steps: int, learning_rate: float) -> None:
+        super().__init__()
+        self.steps, self.learning_rate = int(steps), float(learning_rate)
+        self.held = False
+
+    def actor_parameters(self):
+        policy = self.model.policy
+        parts = [policy.mlp_extractor.policy_net, policy.action_net]
+        parameters = [p for part in parts for p in part.parameters()]
+        if isinstance(getattr(policy, "log_std", None), torch.nn.Parameter):
+            parameters.append(policy.log_std)
+        return parameters
+
+    def _set_held(self, held: bool) -> None:
+        for parameter in self.actor_parameters():
+            parameter.requires_grad_(not held)
+        # Schedules as SB3 builds them (picklable: checkpoints save them); after the warm-up, the
+        # run's own learning rate, which is the model's even when resumed from a warm-up checkpoint.
+        self.model.lr_schedule = FloatSchedule(self.learning_rate if held else self.model.learning_rate)
+        self.held = held
+
+    def _on_training_start(self) -> None:
+        if self.num_timesteps < self.steps:
+            self._set_held(True)
+
+    def _on_rollout_end(self) -> None:
+        if self.held and self.num_timesteps > self.steps:  # this rollout's update is past the warm-up
+            self._set_held(False)
+        self.logger.record("train/actor_held", float(self.held))
+
+    def _on_step(self) -> bool:
+        return True

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -55,19 +56,40 @@ def make_env_factory(task: str, env_overrides: Dict[str, Any], seed: int, rank: 
     return _init
 
 
+def available_cores() -> int:
+    """CPU cores this process may run on (its affinity mask, not the machine's count)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
 def make_vec_env(task: str, env_overrides: Dict[str, Any], n_envs: int, seed: int,
-                 monitor_dir: Optional[Path], subprocess: bool, start_method: str = "forkserver"):
-    """``n_envs`` environments, in subprocesses (``start_method``) when ``subprocess`` and n_envs > 1.
+                 monitor_dir: Optional[Path], subprocess: bool, start_method: str = "forkserver",
+                 processes: Optional[int] = None):
+    """``n_envs`` environments, stepped on ``processes`` cores when ``subprocess``.
+
+    The environments are cut into one chunk per process: this process steps the first chunk,
+    worker processes step the others (:class:`~fr5_rl.training.vec_env.ChunkedSubprocVecEnv`).
+    Environment ``rank`` is seeded ``seed + rank`` wherever it runs, so the layout changes speed,
+    never results.
 
     :param start_method: ``forkserver`` (train.py), or ``spawn`` inside a Ray worker, where forking
         a process that runs Ray's threads can hang.
+    :param processes: processes stepping environments, this one included; default one per
+        available core, at most ``n_envs``. One means a plain ``DummyVecEnv``.
     """
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+    from stable_baselines3.common.vec_env import DummyVecEnv
 
+    from .vec_env import ChunkedSubprocVecEnv
+
+    if processes is not None and processes < 1:
+        raise ConfigError(f"--processes must be at least 1, got {processes}")
     factories = [make_env_factory(task, env_overrides, seed, rank, monitor_dir) for rank in range(n_envs)]
-    if subprocess and n_envs > 1:
-        return SubprocVecEnv(factories, start_method=start_method)
-    return DummyVecEnv(factories)
+    processes = min(processes or available_cores(), n_envs) if subprocess else 1
+    if processes <= 1:
+        return DummyVecEnv(factories)
+    return ChunkedSubprocVecEnv(factories, processes, start_method=start_method)
 
 
 def build_callbacks(args: argparse.Namespace, run_dir: Path, eval_env, meta: Dict[str, Any], t_start: float,
@@ -94,10 +116,8 @@ def close_vec_env(venv, interrupted: bool) -> None:
     them read; a polite close would then wait for answers that never come. The workers hold
     nothing worth saving, so they are terminated instead.
     """
-    from stable_baselines3.common.vec_env import SubprocVecEnv
-
     inner = getattr(venv, "venv", venv)
-    if interrupted and isinstance(inner, SubprocVecEnv):
+    if interrupted and hasattr(inner, "processes"):  # SubprocVecEnv or ChunkedSubprocVecEnv
         for process in inner.processes:
             process.terminate()
         for process in inner.processes:
@@ -117,8 +137,11 @@ def write_run_config(run_dir: Path, args: argparse.Namespace, hyper: Hyperparame
         "target_success": args.target_success, **extra})
 
 
-def initialise_from(model_dir: Path, task: str, algo: str, venv, meta: Dict[str, Any], run_dir: Path):
-    """A trained model and its VecNormalize statistics, bound to this run's environments.
+def initialise_from(model_dir: Path, task: str, algo: str, venv, meta: Dict[str, Any], run_dir: Path,
+                    algo_kwargs: Dict[str, Any]):
+    """A trained model and its VecNormalize statistics, bound to this run's environments, with
+    this run's algorithm settings (learning rate, n_steps, clip range, ...) in place of the ones it
+    was saved with; its network (``policy``, ``policy_kwargs``) is the saved one.
 
     :raises ConfigError: the model is for another task, algorithm or observation/action size.
     :raises ModelFilesError: its files are missing or damaged.
@@ -129,7 +152,9 @@ def initialise_from(model_dir: Path, task: str, algo: str, venv, meta: Dict[str,
             raise ConfigError(f"--init-from {model_dir}: its {key} is {source.get(key)!r}, this run's is "
                               f"{meta.get(key)!r}; start from a model of the same task and algorithm")
     check_files_present(model_dir, "torch")
-    model, venv = load_trained(model_dir, algorithm_class(algo), venv, tensorboard_log=str(run_dir / "tb"))
+    settings = {key: value for key, value in algo_kwargs.items() if key not in ("policy", "policy_kwargs")}
+    model, venv = load_trained(model_dir, algorithm_class(algo), venv, tensorboard_log=str(run_dir / "tb"),
+                               **settings)
     venv.training = True  # the statistics keep adapting to the new randomisation
     return model, venv
 
@@ -202,7 +227,8 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
     probe.close()
 
     venv = make_vec_env(args.task, env_overrides, args.n_envs, args.seed, run_dir / "monitor",
-                        not args.no_subprocess, getattr(args, "start_method", "forkserver"))
+                        not args.no_subprocess, getattr(args, "start_method", "forkserver"),
+                        getattr(args, "processes", None))
     eval_env = make_vec_env(args.task, env_overrides, 1, args.seed + EVAL_SEED_OFFSET, None, False)
     algo_cls = algorithm_class(args.algo)
     latest = run_dir / "checkpoints" / "latest"
@@ -216,7 +242,7 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
             model.load_replay_buffer(latest / REPLAY_FILE)
         print(f"train.py: resuming {run_dir} from step {model.num_timesteps}")
     elif getattr(args, "init_from", None) is not None and not args.resume:
-        model, venv = initialise_from(args.init_from, args.task, args.algo, venv, meta, run_dir)
+        model, venv = initialise_from(args.init_from, args.task, args.algo, venv, meta, run_dir, hyper.algo_kwargs)
         meta["initialised_from"] = {"model": str(args.init_from), "num_timesteps": int(model.num_timesteps)}
         model.num_timesteps = 0  # --timesteps counts this run's steps
         write_run_config(run_dir, args, hyper, init_from=str(args.init_from))
@@ -237,6 +263,10 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
     summary.update({"task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
                     "machine": machine_description(), "target_success": args.target_success})
     callbacks = build_callbacks(args, run_dir, eval_env, meta, t_start - elapsed_before, summary)
+    if hyper.critic_warmup is not None:
+        from .callbacks import CriticWarmup
+
+        callbacks.callbacks.insert(0, CriticWarmup(hyper.critic_warmup.steps, hyper.critic_warmup.learning_rate))
     if extra_callbacks is not None:
         callbacks.callbacks.extend(extra_callbacks(run_dir, meta, summary))
     remaining = max(args.timesteps - int(model.num_timesteps), 0)

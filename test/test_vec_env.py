@@ -1,0 +1,98 @@
+"""ChunkedSubprocVecEnv: environments in chunks over processes behave exactly as a DummyVecEnv of
+the same environments (layout changes speed, never results), and route attribute and method
+calls to the process that holds each environment."""
+import numpy as np
+import pytest
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from fr5_rl.training.train import make_env_factory, make_vec_env
+from fr5_rl.training.vec_env import ChunkedSubprocVecEnv, split_evenly
+
+# Randomisation on, so that every environment's own seeded draws matter.
+ENV = {"randomisation": {"enabled": True, "action_latency_steps": [0, 1], "observation_noise_std": 0.002,
+                         "physics_dt_choices": [0.005, 0.01]}, "reach": {"max_steps": 20}}
+
+
+def factories(n_envs, seed=3):
+    return [make_env_factory("reach", ENV, seed, rank, None) for rank in range(n_envs)]
+
+
+def test_split_evenly_covers_every_index_once_in_near_equal_chunks():
+    for n_items in range(1, 12):
+        for n_chunks in range(1, n_items + 1):
+            chunks = split_evenly(n_items, n_chunks)
+            assert [i for chunk in chunks for i in chunk] == list(range(n_items))
+            sizes = [len(chunk) for chunk in chunks]
+            assert max(sizes) - min(sizes) <= 1 and min(sizes) >= 1
+    with pytest.raises(ValueError, match="processes"):
+        split_evenly(3, 4)
+    with pytest.raises(ValueError):
+        split_evenly(3, 0)
+
+
+def test_chunked_steps_exactly_as_a_dummy_vec_env_through_automatic_resets():
+    """Same seeds, same actions: identical observations, rewards, dones, infos and terminal
+    observations over several 20-step episodes (so automatic resets happen in every chunk)."""
+    n_envs, steps = 5, 70
+    reference = DummyVecEnv(factories(n_envs))
+    chunked = ChunkedSubprocVecEnv(factories(n_envs), 3, start_method="forkserver")
+    try:
+        assert chunked.chunks == [range(0, 2), range(2, 3), range(3, 5)]
+        reference.seed(11)
+        chunked.seed(11)
+        np.testing.assert_array_equal(chunked.reset(), reference.reset())
+        actions = np.random.default_rng(0).uniform(-1, 1, (steps, n_envs, 7)).astype(np.float32)
+        resets = 0
+        for action in actions:
+            obs_c, rew_c, done_c, info_c = chunked.step(action)
+            obs_r, rew_r, done_r, info_r = reference.step(action)
+            np.testing.assert_array_equal(obs_c, obs_r)
+            np.testing.assert_array_equal(rew_c, rew_r)
+            np.testing.assert_array_equal(done_c, done_r)
+            for one_c, one_r in zip(info_c, info_r):
+                assert one_c.keys() == one_r.keys()
+                if "terminal_observation" in one_r:
+                    np.testing.assert_array_equal(one_c["terminal_observation"], one_r["terminal_observation"])
+                    resets += 1
+        assert resets >= 2 * n_envs
+        assert len(chunked.reset_infos) == n_envs
+    finally:
+        chunked.close()
+        reference.close()
+
+
+def test_attributes_and_methods_reach_the_right_environment_in_any_order():
+    chunked = ChunkedSubprocVecEnv(factories(4), 2, start_method="forkserver")
+    try:
+        chunked.reset()
+        assert chunked.get_attr("control_dt") == [0.02] * 4
+        chunked.set_attr("marker", "a", indices=[3, 0])
+        chunked.set_attr("marker", "b", indices=[1, 2])
+        assert chunked.get_attr("marker", indices=[3, 1, 0, 2]) == ["a", "b", "a", "b"]
+        assert chunked.env_is_wrapped(Monitor) == [True] * 4
+        assert chunked.has_attr("control_dt") and not chunked.has_attr("no_such_attribute")
+        # An error inside a worker is raised here; the worker lives on and answers the next call.
+        with pytest.raises(AttributeError):
+            chunked.env_method("no_such_method", indices=[3])
+        assert chunked.get_attr("marker", indices=[3]) == ["a"]
+    finally:
+        chunked.close()
+    chunked.close()  # a second close is harmless
+    assert all(not process.is_alive() for process in chunked.processes)
+
+
+def test_make_vec_env_picks_the_layout_from_processes():
+    one = make_vec_env("reach", ENV, 3, 0, None, subprocess=True, processes=1)
+    two = make_vec_env("reach", ENV, 3, 0, None, subprocess=True, processes=2)
+    off = make_vec_env("reach", ENV, 3, 0, None, subprocess=False, processes=2)
+    try:
+        assert isinstance(one, DummyVecEnv) and isinstance(off, DummyVecEnv)
+        assert isinstance(two, ChunkedSubprocVecEnv) and len(two.processes) == 1  # + this process
+    finally:
+        for venv in (one, two, off):
+            venv.close()
+    from fr5_rl.config import ConfigError
+
+    with pytest.raises(ConfigError, match="--processes"):
+        make_vec_env("reach", ENV, 3, 0, None, subprocess=True, processes=0)
