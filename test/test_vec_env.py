@@ -92,7 +92,12 @@ def test_make_vec_env_picks_the_layout_from_processes():
     finally:
         for venv in (one, two, off):
             venv.close()
-    from fr5_rl.config import ConfigError
 
-    with pytest.raises(ConfigError, match="--processes"):
-        make_vec_env("reach", ENV, 3, 0, None, subprocess=True, processes=0)
+
+def test_processes_below_one_refused_before_any_run_directory(tmp_path, capsys):
+    from fr5_rl.cli import train
+
+    run_dir = tmp_path / "run"
+    assert train.main(["--processes", "0", "--timesteps", "100", "--run-dir", str(run_dir), "--no-progress"]) == 2
+    assert "--processes must be at least 1" in capsys.readouterr().err
+    assert not run_dir.exists()

@@ -83,8 +83,6 @@ def make_vec_env(task: str, env_overrides: Dict[str, Any], n_envs: int, seed: in
 
     from .vec_env import ChunkedSubprocVecEnv
 
-    if processes is not None and processes < 1:
-        raise ConfigError(f"--processes must be at least 1, got {processes}")
     factories = [make_env_factory(task, env_overrides, seed, rank, monitor_dir) for rank in range(n_envs)]
     processes = min(processes or available_cores(), n_envs) if subprocess else 1
     if processes <= 1:
@@ -211,6 +209,8 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
         args.timesteps = int(args.timesteps or hyper.n_timesteps)
         if args.run_dir is None:
             args.run_dir = Path("runs") / f"{args.task}_{args.algo}_{time.strftime('%Y%m%d-%H%M%S')}"
+    if getattr(args, "processes", None) is not None and args.processes < 1:
+        raise ConfigError(f"--processes must be at least 1, got {args.processes}")
     for warning in check_hyperparameters(args.algo, hyper, args.n_envs, source):
         print(f"train.py: warning: {warning}", file=sys.stderr)
     run_dir: Path = args.run_dir

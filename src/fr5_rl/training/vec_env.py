@@ -130,17 +130,17 @@ class ChunkedSubprocVecEnv(VecEnv):
             self.processes.append(process)
             child.close()
             workers.append(parent)
-        # Workers first: each message goes out before the local chunk's work, then is collected.
         self.local = _LocalChunk([env_fns[i] for i in self.chunks[0]])
         self.remotes: List[Any] = [self.local, *workers]
         self.waiting, self.closed = False, False
         super().__init__(len(env_fns), self.local.venv.observation_space, self.local.venv.action_space)
 
-    def _broadcast(self, messages: Sequence[Tuple[str, Any]], targets: Sequence[int]) -> List[Any]:
-        """Send each target its message, workers before the local chunk so they run alongside it."""
-        for target in sorted(targets, key=lambda t: t == 0):
-            self.remotes[target].send(messages[targets.index(target)])
-        return [self.remotes[target].recv() for target in targets]
+    def _all(self, messages: Sequence[Tuple[str, Any]]) -> List[Any]:
+        """One message per chunk; the workers' go out first so they run alongside the local chunk."""
+        for remote, message in list(zip(self.remotes, messages))[1:]:
+            remote.send(message)
+        self.local.send(messages[0])
+        return [_raise_error(remote.recv()) for remote in self.remotes]
 
     # -- stepping ---------------------------------------------------------------------------
     def step_async(self, actions: np.ndarray) -> None:
@@ -150,7 +150,7 @@ class ChunkedSubprocVecEnv(VecEnv):
         self.waiting = True
 
     def step_wait(self):
-        # The local chunk steps while the workers step theirs.
+        # The local chunk steps while the workers step theirs (sent in step_async).
         self.local.send(("step", self._actions[self.chunks[0].start:self.chunks[0].stop]))
         results = [_raise_error(remote.recv()) for remote in self.remotes]
         self.waiting = False
@@ -161,7 +161,7 @@ class ChunkedSubprocVecEnv(VecEnv):
     def reset(self):
         messages = [("reset", (self._seeds[chunk.start:chunk.stop], self._options[chunk.start:chunk.stop]))
                     for chunk in self.chunks]
-        results = [_raise_error(answer) for answer in self._broadcast(messages, list(range(len(self.chunks))))]
+        results = self._all(messages)
         self.reset_infos = [info for result in results for info in result[1]]
         self._reset_seeds()
         self._reset_options()
@@ -212,8 +212,7 @@ class ChunkedSubprocVecEnv(VecEnv):
         return self._ask(indices, lambda local: ("get_attr", (attr_name, local)))
 
     def has_attr(self, attr_name: str) -> bool:
-        targets = list(range(len(self.chunks)))
-        return all(_raise_error(a) for a in self._broadcast([("has_attr", attr_name)] * len(targets), targets))
+        return all(self._all([("has_attr", attr_name)] * len(self.chunks)))
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
         self._ask(indices, lambda local: ("set_attr", (attr_name, value, local)))
