@@ -149,6 +149,27 @@ def test_an_object_that_has_gone_is_not_tracked():
     assert isinstance(frames(scene(GRIPPER_OVER_IT)), Refusal)
 
 
+def test_a_hidden_object_pushed_by_the_fingers_is_found_beside_its_old_place():
+    pushed = (0.13, -0.05, 0.025, 0.025, 0.06)       # 3 cm along x: its old place shows bare table
+    finger = (0.13, -0.05, 0.012, 0.045, 0.2)        # over its middle, so the detector refuses it
+    view = scene(pushed, finger)
+    assert detect(view).reason is RefusalReason.OCCLUDED
+    frames = Frames()
+    frames(scene(OBJECT))
+    moved = frames(view)
+    assert isinstance(moved, TrackedObject) and moved.state is TrackState.HIDDEN, moved
+    assert moved.position_table[0] == pytest.approx(0.13, abs=0.006)
+    assert moved.position_table[1] == pytest.approx(-0.05, abs=0.006)
+    # Without the search (nudge_radius 0) the same frame drops the track, as before.
+    frames = Frames(nudge_radius=0.0)
+    frames(scene(OBJECT))
+    assert isinstance(frames(view), Refusal)
+    # Pushed further than nudge_radius: dropped.
+    frames = Frames(nudge_radius=0.01)
+    frames(scene(OBJECT))
+    assert isinstance(frames(view), Refusal)
+
+
 def test_the_robot_elsewhere_does_not_keep_a_gone_object():
     frames = Frames()
     frames(scene(OBJECT))

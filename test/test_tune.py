@@ -108,8 +108,21 @@ def test_trial_hyperparameters_set_dotted_keys_and_refuse_unknown_ones():
         tune.trial_hyperparameters(base, {}, {"n_envs.x": 1}, 1, 10)
 
 
-def test_cpus_per_trial_counts_environments_and_learner():
-    assert [tune.cpus_per_trial(n) for n in (1, 2, 4)] == [1, 3, 5]
+def test_trial_processes_default_to_one_per_environment_and_are_capped():
+    assert [tune.trial_processes(n, None) for n in (1, 2, 4)] == [1, 2, 4]
+    assert [tune.trial_processes(16, p) for p in (1, 3, 40)] == [1, 3, 16]
+
+
+def test_processes_are_checked_and_saved(tmp_path):
+    space = tiny_space(tmp_path)
+    assert tune.build_settings("reach", "ppo", 1, "random", "none", tmp_path, space).trial_cpus == 1
+    settings = tune.build_settings("reach", "ppo", 1, "random", "none", tmp_path, space, n_envs=4, processes=2)
+    assert (settings.n_envs, settings.trial_cpus) == (4, 2)
+    with pytest.raises(ConfigError, match="--processes must be at least 1"):
+        tune.build_settings("reach", "ppo", 1, "random", "none", tmp_path, space, processes=0)
+    space.write_text(space.read_text().replace("n_envs: 1,", "n_envs: 2, processes: 3,"), encoding="utf-8")
+    with pytest.raises(ConfigError, match="'trial.processes' must be 1..n_envs"):
+        tune.build_settings("reach", "ppo", 1, "random", "none", tmp_path, space)
 
 
 def row(trial_id, success, steps, to_solve=None, status="finished"):
@@ -146,7 +159,8 @@ def test_resume_needs_an_earlier_experiment(tmp_path, capsys):
 def test_a_trial_bigger_than_every_node_is_refused(tmp_path, capsys, cluster):
     code = tune_cli.main(["--space", str(tiny_space(tmp_path)), "--n-envs", "2", "--samples", "1",
                           "--out", str(tmp_path / "out")])
-    assert code == 2 and "a trial needs 3 CPUs" in capsys.readouterr().err
+    error = capsys.readouterr().err
+    assert code == 2 and "a trial needs 2 CPUs" in error and "--processes 1" in error
 
 
 # ----------------------------------------------------------------------------- on a 2-node cluster
@@ -163,8 +177,9 @@ def test_sweep_runs_trials_on_both_nodes_and_writes_its_outputs(cluster, tmp_pat
     from fr5_rl.runtime.policy import load_policy
 
     out = tmp_path / "out"
+    # two environments in each one-CPU trial: --processes 1 steps both in the trainer's process
     code = tune_cli.main(["--space", str(tiny_space(tmp_path)), "--samples", "2", "--search", "optuna",
-                          "--scheduler", "asha", "--out", str(out)])
+                          "--scheduler", "asha", "--n-envs", "2", "--processes", "1", "--out", str(out)])
     assert code == 0
     rows = read_rows(out)
     assert len(rows) == 2 and [r["rank"] for r in rows] == [1, 2]
@@ -180,6 +195,7 @@ def test_sweep_runs_trials_on_both_nodes_and_writes_its_outputs(cluster, tmp_pat
     assert math.isclose(hyper.algo_kwargs["learning_rate"], rows[0]["config"]["algo_kwargs.learning_rate"])
     meta = json.loads((out / "best_model" / "meta.json").read_text())
     assert meta["tune"]["trial_id"] == rows[0]["trial_id"] and meta["task"] == "reach" and meta["algo"] == "ppo"
+    assert hyper.n_envs == 2
     for backend in ("torch", "onnx"):
         policy = load_policy(out / "best_model", backend, expected_task="reach")
         assert policy.act(__import__("numpy").zeros(23, dtype="float32")).shape == (7,)

@@ -1,7 +1,7 @@
 """Ray Tune bench: training throughput on 1 vs 2 Ray nodes, and the compute ASHA needs to find
 a configuration that solves reach (95 % evaluation success) against running every trial to the end.
 
-    python tools/bench_tune.py            # full: ~1 h on 2 cores (8 trials x up to 300 k steps, twice)
+    python tools/bench_tune.py            # full: 37 min on 2 cores (8 trials x up to 300 k steps, twice)
     python tools/bench_tune.py --quick    # smoke: a few minutes, tiny trials (no 95 % expected)
 
 Both parts run on a Ray cluster made on this machine with ``ray.cluster_utils.Cluster``, one

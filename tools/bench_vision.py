@@ -274,6 +274,7 @@ def main(argv: Optional[List[str]] = None) -> int:
                               "offline": offline(args.placements, args.noise, ["tiny", "egl"], 22, profile)}
     camera_period_ms = 1000.0 / float(camera_config(profile)["rate"])
     tasks = [task for task in ("reach", "grasp") if task in args.tasks.split(",")]
+    args.results.mkdir(parents=True, exist_ok=True)
     if not args.skip_ros:
         # One process per run: a rospy node cannot move to the next launch's master.
         for task, offset in ((task, ("reach", "grasp").index(task)) for task in tasks):

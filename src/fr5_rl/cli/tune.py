@@ -11,6 +11,7 @@ Examples::
     rosrun fr5_rl tune.py --task reach --algo ppo --samples 8      # config/search_ppo_reach.yaml
     rosrun fr5_rl tune.py --samples 2 --max-timesteps 4000 --search random --scheduler none
     rosrun fr5_rl tune.py --samples 32 --address auto --n-envs 4 --out runs/tune_reach
+    rosrun fr5_rl tune.py --n-envs 16 --processes 1   # 16 environments in each 1-CPU trial
     rosrun fr5_rl tune.py --resume runs/tune_reach                  # after Ctrl-C or a killed driver
 """
 from __future__ import annotations
@@ -40,7 +41,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="Ray cluster to join: auto or HOST:PORT (default: RAY_ADDRESS, else a local Ray)")
     parser.add_argument("--max-timesteps", type=int, default=None, help="cap on each trial's steps (smoke runs)")
     parser.add_argument("--n-envs", type=int, default=None,
-                        help="environments per trial (default: the space file's); CPUs per trial = n_envs + 1")
+                        help="environments per trial (default: the space file's)")
+    parser.add_argument("--processes", type=int, default=None,
+                        help="processes stepping each trial's environments, the trainer's included; the CPUs a "
+                             "trial declares (default: the space file's trial.processes, else one per environment)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the search itself (0)")
     parser.add_argument("--out", type=Path, default=None, help="output directory (default: runs/tune_<task>_<algo>_<time>)")
     parser.add_argument("--storage", default=None,
@@ -61,7 +65,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         else:
             out = args.out or Path("runs") / f"tune_{args.task}_{args.algo}_{time.strftime('%Y%m%d-%H%M%S')}"
             settings = build_settings(args.task, args.algo, args.samples, args.search, args.scheduler, out,
-                                      args.space, args.max_timesteps, args.n_envs, args.seed, args.storage)
+                                      args.space, args.max_timesteps, args.n_envs, args.seed, args.storage,
+                                      args.processes)
             experiment = TuneExperiment(settings, args.address)
         rows = experiment.run(resume=args.resume is not None)
     except (ConfigError, ModelFilesError) as error:

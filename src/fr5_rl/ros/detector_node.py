@@ -86,6 +86,8 @@ class DetectorNodeParams:
     closing_axis: List[float]
     gate_height: float
     gate_size: float
+    nudge_radius: float
+    nudge_step: float
     tcp_frame: str
     joint_states_topic: str
     track_state_topic: str
@@ -94,9 +96,10 @@ class DetectorNodeParams:
         if self.sync_slop <= 0 or self.max_image_age <= 0:
             raise ConfigError(f"{source}: sync_slop and max_image_age must be > 0")
         if min(self.hidden_timeout, self.in_hand_timeout, self.front_tolerance, self.grasp_radius,
-               self.grasp_width_margin, self.min_grasp_fraction) < 0 or not 0 <= self.max_table_fraction <= 1:
+               self.grasp_width_margin, self.min_grasp_fraction, self.nudge_radius) < 0 \
+                or self.nudge_step <= 0 or not 0 <= self.max_table_fraction <= 1:
             raise ConfigError(f"{source}: the tracking parameters must be >= 0 and max_table_fraction in [0, 1] "
-                              "(hidden_timeout 0 switches tracking off)")
+                              "(hidden_timeout 0 switches tracking off), nudge_step > 0")
         if len(self.closing_axis) != 3 or not np.linalg.norm(self.closing_axis) > 0:
             raise ConfigError(f"{source}: closing_axis must be a non-zero 3-vector (the fingers' direction in "
                               f"the tcp frame), got {self.closing_axis}")
@@ -124,7 +127,8 @@ def tracker_settings_from(params: DetectorNodeParams) -> TrackerSettings:
                            grasp_radius=params.grasp_radius, grasp_width_margin=params.grasp_width_margin,
                            min_grasp_fraction=params.min_grasp_fraction, closing_tolerance=params.closing_tolerance,
                            closing_axis=tuple(params.closing_axis), gate_height=params.gate_height,
-                           gate_size=params.gate_size)
+                           gate_size=params.gate_size, nudge_radius=params.nudge_radius,
+                           nudge_step=params.nudge_step)
 
 
 class DetectorNode:

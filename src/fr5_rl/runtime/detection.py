@@ -479,6 +479,10 @@ class TrackerSettings:
     :param gate_height: m; while an object is tracked, a detection whose top differs from its
         standing top height by more than this is a part of it (a finger hides the rest): hidden.
     :param gate_size: likewise for a top face width that differs by more than this fraction.
+    :param nudge_radius: m; fingers closing or pressing beside a hidden object push it a little.
+        Where its top face was shows bare table, the tracker looks for that face up to this far
+        away (still hidden by something in front of it) before it drops the track; 0: never.
+    :param nudge_step: m between the positions it looks at.
     """
 
     hidden_timeout: float = 2.0
@@ -492,6 +496,8 @@ class TrackerSettings:
     closing_axis: Tuple[float, float, float] = (0.0, 1.0, 0.0)
     gate_height: float = 0.01
     gate_size: float = 0.3
+    nudge_radius: float = 0.03
+    nudge_step: float = 0.005
 
 
 def footprint_view(depth: np.ndarray, intrinsics: Intrinsics, table_from_optical: np.ndarray,
@@ -636,7 +642,7 @@ class ObjectTracker:
         if look is None:
             return result
         gone = self._gone(look)
-        if gone is not None:
+        if gone is not None and not self._nudged(look):
             self.reset()
             return Refusal(result.reason, f"{result.detail}; {gone}")
         if result.reason is RefusalReason.NO_OBJECT and self._in_front == 0.0:
@@ -712,6 +718,37 @@ class ObjectTracker:
         if table > self.settings.max_table_fraction:
             return f"where it should be the table is bare ({table:.0%} of its top face)"
         return None
+
+    def _nudged(self, look) -> bool:
+        """Where the hidden object's top face would be after a push of up to ``nudge_radius``:
+        the place with the least bare table among those where something stands in front of the
+        face (the hand that pushed it) and at most ``max_table_fraction`` of it shows the table,
+        the nearest on a tie. Moves the track there; False (the track unchanged) when none is."""
+        s = self.settings
+        if s.nudge_radius <= 0.0 or s.nudge_step <= 0.0:
+            return False
+        depth, intrinsics, table_from_optical = look
+        steps = int(s.nudge_radius // s.nudge_step)
+        best: Optional[Tuple[float, float, np.ndarray, float]] = None
+        for i in range(-steps, steps + 1):
+            for j in range(-steps, steps + 1):
+                shift = np.array([i, j], dtype=np.float64) * s.nudge_step
+                distance = float(np.hypot(*shift))
+                if distance == 0.0 or distance > s.nudge_radius + 1e-9:
+                    continue
+                centre = self._position.copy()
+                centre[:2] += shift
+                in_front, table, samples = footprint_view(
+                    depth, intrinsics, table_from_optical, self.detector_settings, centre, self._top_height,
+                    self._size, s.front_tolerance)
+                if samples == 0 or in_front == 0.0 or table > s.max_table_fraction:
+                    continue
+                if best is None or (table, distance) < best[:2]:
+                    best = (table, distance, centre, in_front)
+        if best is None:
+            return False
+        self._position, self._in_front = best[2], best[3]
+        return True
 
     def _held(self, state: TrackState) -> TrackedObject:
         in_tcp = tuple(self._in_tcp.tolist()) if state is TrackState.IN_HAND else None

@@ -94,11 +94,16 @@ class TrialSettings:
     target_success: float
     stop_at_success: bool
     max_failures: int
+    #: processes stepping a trial's environments, the trainer's own included (= the CPUs the
+    #: trial declares); None: one per environment. 1 steps them all in the trainer's process.
+    processes: Optional[int] = None
 
     def check(self, source: str) -> None:
         for name in ("n_envs", "timesteps", "eval_freq", "eval_episodes"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"{source}: 'trial.{name}' must be at least 1, got {getattr(self, name)}")
+        if self.processes is not None and not 1 <= self.processes <= self.n_envs:
+            raise ConfigError(f"{source}: 'trial.processes' must be 1..n_envs ({self.n_envs}), got {self.processes}")
         if not 0.0 < self.target_success <= 1.0:
             raise ConfigError(f"{source}: 'trial.target_success' must be in (0, 1], got {self.target_success}")
         if self.max_failures < 0:
@@ -226,9 +231,14 @@ def trial_hyperparameters(base: Mapping[str, Any], fixed: Mapping[str, Any], con
     return hyper
 
 
-def cpus_per_trial(n_envs: int) -> int:
-    """CPUs a trial declares: environments + learner; one env runs in the learner's process."""
-    return n_envs + 1 if n_envs > 1 else 1
+def trial_processes(n_envs: int, processes: Optional[int]) -> int:
+    """Processes stepping a trial's ``n_envs`` environments, the trainer's included: ``processes``
+    capped at ``n_envs``, or one per environment when None.
+
+    This is also the CPUs a trial declares: the trainer steps the first chunk of environments
+    itself (:class:`~fr5_rl.training.vec_env.ChunkedSubprocVecEnv`) and learns between rollouts.
+    """
+    return max(1, min(processes or n_envs, n_envs))
 
 
 # ----------------------------------------------------------------------------- the settings
@@ -249,6 +259,13 @@ class ExperimentSettings:
     seed: int
     out: str
     storage: str
+    #: processes per trial (:func:`trial_processes`); None in settings saved before it existed
+    processes: Optional[int] = None
+
+    @property
+    def trial_cpus(self) -> int:
+        """Processes, and so CPUs, of each trial."""
+        return trial_processes(self.n_envs, self.processes)
 
     @property
     def spec(self) -> SearchFile:
@@ -260,12 +277,14 @@ class ExperimentSettings:
 
 def build_settings(task: str, algo: str, samples: int, search: str, scheduler: str, out: Path,
                    space_path: Optional[str | Path] = None, max_timesteps: Optional[int] = None,
-                   n_envs: Optional[int] = None, seed: int = 0, storage: Optional[str] = None) -> ExperimentSettings:
+                   n_envs: Optional[int] = None, seed: int = 0, storage: Optional[str] = None,
+                   processes: Optional[int] = None) -> ExperimentSettings:
     """Read the search and hyperparameter files and resolve the per-trial budget.
 
     :param max_timesteps: caps each trial's ``timesteps`` (smoke runs); evaluations (= reports)
         then come at most every ``max_timesteps / 2`` steps so that a trial reports at least twice.
     :param n_envs: overrides the search file's ``trial.n_envs``.
+    :param processes: overrides the search file's ``trial.processes`` (see :func:`trial_processes`).
     :param storage: Tune's storage (a path on a file system every node sees, or a URI such as
         ``s3://bucket/dir``); default ``out`` itself.
     :raises ConfigError: a bad file, or hyperparameters that fail train.py's checks.
@@ -279,6 +298,9 @@ def build_settings(task: str, algo: str, samples: int, search: str, scheduler: s
     timesteps = min(spec.trial.timesteps, max_timesteps) if max_timesteps else spec.trial.timesteps
     eval_freq = min(spec.trial.eval_freq, max(timesteps // 2, 1))
     n_envs = n_envs or spec.trial.n_envs
+    if processes is not None and processes < 1:
+        raise ConfigError(f"--processes must be at least 1, got {processes}")
+    processes = trial_processes(n_envs, processes if processes is not None else spec.trial.processes)
     # The fixed values must make a valid file on their own (sampled ones are checked per trial).
     probe = trial_hyperparameters(base, spec.fixed, {}, n_envs, timesteps)
     from ..config import Hyperparameters
@@ -288,7 +310,7 @@ def build_settings(task: str, algo: str, samples: int, search: str, scheduler: s
     return ExperimentSettings(task=task, algo=algo, samples=samples, search=search, scheduler=scheduler,
                               search_file=dataclasses.asdict(spec), base_hyperparameters=base,
                               timesteps=int(timesteps), eval_freq=int(eval_freq), n_envs=int(n_envs),
-                              seed=int(seed), out=str(out), storage=storage or str(out))
+                              seed=int(seed), out=str(out), storage=storage or str(out), processes=processes)
 
 
 # ----------------------------------------------------------------------------- inside a trial
@@ -362,6 +384,7 @@ def run_trial(config: Dict[str, Any], settings: Dict[str, Any]) -> None:
     tune = tune_api()
     spec = typed(SearchFile, settings["search_file"], SETTINGS_FILE)
     node_id = ray.get_runtime_context().get_node_id()
+    processes = trial_processes(settings["n_envs"], settings.get("processes"))
     run_dir = Path(tempfile.mkdtemp(prefix=f"fr5_rl_trial_{tune.get_context().get_trial_id()}_"))
     try:
         checkpoint = tune.get_checkpoint()
@@ -380,7 +403,7 @@ def run_trial(config: Dict[str, Any], settings: Dict[str, Any]) -> None:
             timesteps=settings["timesteps"], run_dir=run_dir, resume=checkpoint is not None, init_from=None,
             checkpoint_freq=settings["eval_freq"], eval_freq=settings["eval_freq"],
             eval_episodes=spec.trial.eval_episodes, target_success=spec.trial.target_success,
-            stop_at_success=spec.trial.stop_at_success, no_subprocess=settings["n_envs"] == 1,
+            stop_at_success=spec.trial.stop_at_success, no_subprocess=processes == 1, processes=processes,
             no_progress=True, torch_threads=1, start_method="spawn")
 
         def reporter(directory: Path, meta: Dict[str, Any], summary: Dict[str, Any]) -> List[BaseCallback]:
@@ -568,11 +591,12 @@ class TuneExperiment:
             ray.init(address=self.address, **({"include_dashboard": False} if local else {}),
                      logging_level="warning", log_to_driver=True)
             self._started_ray = True
-        need = cpus_per_trial(self.settings.n_envs)
+        need = self.settings.trial_cpus
         largest = max((node["Resources"].get("CPU", 0.0) for node in ray.nodes() if node["Alive"]), default=0.0)
         if largest < need:
-            raise ConfigError(f"a trial needs {need} CPUs (n_envs {self.settings.n_envs} + learner) on one node, "
-                              f"but the largest node has {largest:g}; use --n-envs 1 or larger nodes")
+            raise ConfigError(f"a trial needs {need} CPUs (its {need} processes of {self.settings.n_envs} "
+                              f"environments) on one node, but the largest node has {largest:g}; use "
+                              f"--processes {max(int(largest), 1)} or larger nodes")
 
     def disconnect(self) -> None:
         if self._started_ray:
@@ -585,7 +609,7 @@ class TuneExperiment:
         _, tune = import_ray()
         settings = self.settings.to_dict()
         return tune.with_resources(tune.with_parameters(run_trial, settings=settings),
-                                   {"cpu": cpus_per_trial(self.settings.n_envs)})
+                                   {"cpu": self.settings.trial_cpus})
 
     def tuner(self):
         """A new Tuner for these settings."""
