@@ -140,3 +140,6 @@ def test_transform_in_chains_configured_entries_and_refuses_unconnected_frames()
     assert np.allclose(transform_in(entries, "c", "c"), np.eye(4))
     with pytest.raises(ConfigError, match="does not connect"):
         transform_in(entries, "c", "a")
+    looped = entries + [{"parent": "c", "child": "a", "matrix": second}]
+    with pytest.raises(ConfigError, match="does not connect"):
+        transform_in(looped, "x", "c")

@@ -82,6 +82,21 @@ def test_attributes_and_methods_reach_the_right_environment_in_any_order():
     assert all(not process.is_alive() for process in chunked.processes)
 
 
+def test_an_error_in_every_chunk_leaves_the_pipes_in_step():
+    """A bad step fails in the trainer's chunk and in the worker's alike: the error is raised
+    once all have answered, so the next step reads its own answers, not the failed ones."""
+    chunked = ChunkedSubprocVecEnv(factories(4), 2, start_method="forkserver")
+    try:
+        observations = chunked.reset()
+        with pytest.raises(Exception):
+            chunked.step(np.zeros((4, 3), dtype=np.float32))  # 3 numbers for 7 actuators
+        good = np.zeros((4,) + chunked.action_space.shape, dtype=np.float32)
+        next_observations, rewards, dones, infos = chunked.step(good)
+        assert next_observations.shape == observations.shape and len(infos) == 4
+    finally:
+        chunked.close()
+
+
 def test_make_vec_env_picks_the_layout_from_processes():
     one = make_vec_env("reach", ENV, 3, 0, None, subprocess=True, processes=1)
     two = make_vec_env("reach", ENV, 3, 0, None, subprocess=True, processes=2)

@@ -463,7 +463,6 @@ class Hyperparameters:
 
     def check(self, source: str) -> None:
         _positive(source, n_timesteps=self.n_timesteps, n_envs=self.n_envs)
-
         try:
             load_env_config(self.env)
         except ConfigError as error:

@@ -76,10 +76,11 @@ def transform_in(entries: List[Dict], parent: str, child: str) -> np.ndarray:
     (e.g. base_link <- camera_link <- camera_color_optical_frame), or ConfigError if the
     entries do not connect them."""
     by_child = {entry["child"]: entry for entry in entries}
-    matrix, frame = np.eye(4), child
+    matrix, frame, hops = np.eye(4), child, 0
     while frame != parent:
         entry = by_child.get(frame)
-        if entry is None:
+        hops += 1
+        if entry is None or hops > len(entries):  # not listed, or a loop of entries that never reaches parent
             raise ConfigError(f"config/static_transforms.yaml does not connect {child} to {parent}")
         matrix = entry["matrix"] @ matrix
         frame = entry["parent"]

@@ -42,8 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--stop-at-success", action="store_true", help="stop once solved")
     parser.add_argument("--no-subprocess", action="store_true", help="all environments in the trainer's process")
     parser.add_argument("--processes", type=int, default=None, metavar="N",
-                        help="worker processes the environments are spread over (default: one per available "
-                             "core, at most n_envs); speed only, results are the same")
+                        help="processes stepping the environments, this one included (default: one per "
+                             "available core, at most n_envs; 1 = --no-subprocess); speed only, results are the same")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--torch-threads", type=int, default=1, help="(1)")
     return parser

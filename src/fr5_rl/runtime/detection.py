@@ -515,31 +515,46 @@ def footprint_view(depth: np.ndarray, intrinsics: Intrinsics, table_from_optical
     :return: ``(in_front, table, samples)``: fractions of the face's sample points that lie in
         the image with depth, and how many those were (0: the face is out of view).
     """
+    in_front, table, samples = footprint_views(depth, intrinsics, table_from_optical, settings,
+                                               np.asarray(centre_table, dtype=np.float64)[None, :2], top_height,
+                                               size, front_tolerance)
+    return float(in_front[0]), float(table[0]), int(samples[0])
+
+
+def footprint_views(depth: np.ndarray, intrinsics: Intrinsics, table_from_optical: np.ndarray,
+                    settings: DetectorSettings, centres_xy: np.ndarray, top_height: float, size: float,
+                    front_tolerance: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`footprint_view` for N candidate centres (N, 2) at once: arrays of N ``in_front``,
+    ``table`` and ``samples``."""
     # Rings over the face, not its rim only: a finger in front of the rim still leaves the centre.
     radii = np.array([0.0, 0.3, 0.6, 0.85]) * (0.5 * size)
     angles = np.linspace(0.0, 2.0 * np.pi, 16, endpoint=False)
     r, a = np.meshgrid(radii, angles)
-    points = np.stack([centre_table[0] + (r * np.cos(a)).ravel(), centre_table[1] + (r * np.sin(a)).ravel(),
-                       np.full(r.size, settings.table_height + top_height), np.ones(r.size)])
+    offsets = np.stack([(r * np.cos(a)).ravel(), (r * np.sin(a)).ravel()], axis=1)
+    centres_xy = np.asarray(centres_xy, dtype=np.float64).reshape(-1, 2)
+    n, m = len(centres_xy), len(offsets)
+    xy = (centres_xy[:, None, :] + offsets[None, :, :]).reshape(-1, 2)
+    points = np.stack([xy[:, 0], xy[:, 1], np.full(n * m, settings.table_height + top_height), np.ones(n * m)])
     table_from_optical = np.asarray(table_from_optical, dtype=np.float64)
     optical = np.linalg.inv(table_from_optical) @ points
     expected = optical[2]
-    ahead = expected > 1e-6
-    pixels = intrinsics.project(optical[:3, ahead].T)
-    u, v = np.rint(pixels[:, 0]).astype(int), np.rint(pixels[:, 1]).astype(int)
-    inside = (u >= 0) & (u < intrinsics.width) & (v >= 0) & (v < intrinsics.height)
-    u, v, expected = u[inside], v[inside], expected[ahead][inside]
-    measured = depth[v, u].astype(np.float64)
-    valid = measured > 0.0
-    if not valid.any():
-        return 0.0, 0.0, 0
-    u, v, expected, measured = u[valid], v[valid], expected[valid], measured[valid]
+    used = expected > 1e-6  # in front of the camera, then: in the image, then: with depth
+    u = np.full(n * m, -1)
+    v = np.full(n * m, -1)
+    pixels = intrinsics.project(optical[:3, used].T)
+    u[used], v[used] = np.rint(pixels[:, 0]).astype(int), np.rint(pixels[:, 1]).astype(int)
+    used &= (u >= 0) & (u < intrinsics.width) & (v >= 0) & (v < intrinsics.height)
+    measured = np.zeros(n * m)
+    measured[used] = depth[v[used], u[used]]
+    used &= measured > 0.0
     rx, ry = intrinsics.ray(u, v)
-    seen = table_from_optical @ np.stack([rx * measured, ry * measured, measured, np.ones(measured.size)])
-    height = seen[2] - settings.table_height
-    in_front = measured < expected - front_tolerance
-    table = (height < settings.min_height) & ~in_front
-    return float(in_front.mean()), float(table.mean()), int(measured.size)
+    seen_height = (table_from_optical[2] @ np.stack([rx * measured, ry * measured, measured, np.ones(n * m)])
+                   - settings.table_height)
+    in_front = used & (measured < expected - front_tolerance)
+    table = used & (seen_height < settings.min_height) & ~in_front
+    samples = used.reshape(n, m).sum(axis=1)
+    share = lambda mask: np.where(samples > 0, mask.reshape(n, m).sum(axis=1) / np.maximum(samples, 1), 0.0)  # noqa: E731
+    return share(in_front), share(table), samples
 
 
 class ObjectTracker:
@@ -728,26 +743,21 @@ class ObjectTracker:
         if s.nudge_radius <= 0.0 or s.nudge_step <= 0.0:
             return False
         depth, intrinsics, table_from_optical = look
-        steps = int(s.nudge_radius // s.nudge_step)
-        best: Optional[Tuple[float, float, np.ndarray, float]] = None
-        for i in range(-steps, steps + 1):
-            for j in range(-steps, steps + 1):
-                shift = np.array([i, j], dtype=np.float64) * s.nudge_step
-                distance = float(np.hypot(*shift))
-                if distance == 0.0 or distance > s.nudge_radius + 1e-9:
-                    continue
-                centre = self._position.copy()
-                centre[:2] += shift
-                in_front, table, samples = footprint_view(
-                    depth, intrinsics, table_from_optical, self.detector_settings, centre, self._top_height,
-                    self._size, s.front_tolerance)
-                if samples == 0 or in_front == 0.0 or table > s.max_table_fraction:
-                    continue
-                if best is None or (table, distance) < best[:2]:
-                    best = (table, distance, centre, in_front)
-        if best is None:
+        steps = np.arange(-int(s.nudge_radius // s.nudge_step), int(s.nudge_radius // s.nudge_step) + 1)
+        shifts = np.stack(np.meshgrid(steps, steps), axis=-1).reshape(-1, 2) * s.nudge_step
+        distance = np.hypot(shifts[:, 0], shifts[:, 1])
+        around = (distance > 0.0) & (distance <= s.nudge_radius + 1e-9)
+        shifts, distance = shifts[around], distance[around]
+        in_front, table, samples = footprint_views(depth, intrinsics, table_from_optical, self.detector_settings,
+                                                   self._position[:2] + shifts, self._top_height, self._size,
+                                                   s.front_tolerance)
+        fits = np.flatnonzero((samples > 0) & (in_front > 0.0) & (table <= s.max_table_fraction))
+        if fits.size == 0:
             return False
-        self._position, self._in_front = best[2], best[3]
+        best = fits[np.lexsort((distance[fits], table[fits]))[0]]
+        self._position = self._position.copy()
+        self._position[:2] += shifts[best]
+        self._in_front = float(in_front[best])
         return True
 
     def _held(self, state: TrackState) -> TrackedObject:

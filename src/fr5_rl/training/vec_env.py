@@ -57,6 +57,8 @@ def _answer(venv: DummyVecEnv, command: str, data: Any) -> Any:
         return venv.env_method(name, *args, indices=indices, **kwargs)
     if command == "is_wrapped":
         return [is_wrapped(venv.envs[i], data[0]) for i in data[1]]
+    # Returned, not raised: every chunk answers each message, so the pipes stay in step; the
+    # trainer raises it (_raise_error) after reading all answers.
     return NotImplementedError(f"ChunkedSubprocVecEnv: unknown command {command!r}")
 
 
@@ -88,7 +90,10 @@ class _LocalChunk:
         self._answer: Any = None
 
     def send(self, message: Tuple[str, Any]) -> None:
-        self._answer = _answer(self.venv, *message)
+        try:
+            self._answer = _answer(self.venv, *message)
+        except Exception as error:  # as a worker does: raised once every chunk has answered
+            self._answer = error
 
     def recv(self) -> Any:
         answer, self._answer = self._answer, None
@@ -102,6 +107,13 @@ def _raise_error(answer: Any) -> Any:
     if isinstance(answer, Exception):
         raise answer
     return answer
+
+
+def _receive_all(remotes: Sequence[Any]) -> List[Any]:
+    """Every chunk's answer, then the first error among them raised: reading them all first
+    keeps each pipe in step with its messages."""
+    answers = [remote.recv() for remote in remotes]
+    return [_raise_error(answer) for answer in answers]
 
 
 class ChunkedSubprocVecEnv(VecEnv):
@@ -140,7 +152,7 @@ class ChunkedSubprocVecEnv(VecEnv):
         for remote, message in list(zip(self.remotes, messages))[1:]:
             remote.send(message)
         self.local.send(messages[0])
-        return [_raise_error(remote.recv()) for remote in self.remotes]
+        return _receive_all(self.remotes)
 
     # -- stepping ---------------------------------------------------------------------------
     def step_async(self, actions: np.ndarray) -> None:
@@ -152,8 +164,8 @@ class ChunkedSubprocVecEnv(VecEnv):
     def step_wait(self):
         # The local chunk steps while the workers step theirs (sent in step_async).
         self.local.send(("step", self._actions[self.chunks[0].start:self.chunks[0].stop]))
-        results = [_raise_error(remote.recv()) for remote in self.remotes]
         self.waiting = False
+        results = _receive_all(self.remotes)
         self.reset_infos = [info for result in results for info in result[4]]
         return (np.concatenate([r[0] for r in results]), np.concatenate([r[1] for r in results]),
                 np.concatenate([r[2] for r in results]), [info for r in results for info in r[3]])
