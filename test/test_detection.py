@@ -185,6 +185,28 @@ def test_two_candidates_hold_and_drop_the_track():
     assert isinstance(frames(scene(OBJECT, GRIPPER_OVER_IT)), Refusal)
 
 
+def test_finger_tips_beside_a_tracked_object_are_not_another_one():
+    tips = ((0.1, 0.0, 0.012, 0.012, 0.07), (0.1, -0.1, 0.012, 0.012, 0.07))  # lower than the robot's cut
+    view = scene(OBJECT, *tips)
+    untracked = detect(view)
+    assert untracked.reason is RefusalReason.SEVERAL_OBJECTS and len(untracked.candidates) == 3
+    frames = Frames()
+    seen = frames(scene(OBJECT))
+    # The object whole among the tips: it is seen, at its place.
+    beside = frames(view)
+    assert isinstance(beside, TrackedObject) and beside.state is TrackState.SEEN, beside
+    np.testing.assert_allclose(beside.position_table, seen.position_table, atol=1e-6)
+    # Its top hidden, only its lower part among the tips: hidden, not dropped.
+    low_part = scene((0.1, -0.05, 0.025, 0.025, 0.04), *tips)
+    assert detect(low_part).reason is RefusalReason.SEVERAL_OBJECTS
+    hidden = frames(low_part)
+    assert isinstance(hidden, TrackedObject) and hidden.state is TrackState.HIDDEN, hidden
+    # A second object like it is not a tip: which is which cannot be told, the track goes.
+    twin = frames(scene(OBJECT, (-0.1, 0.1, 0.025, 0.025, 0.06), *tips))
+    assert isinstance(twin, Refusal) and twin.reason is RefusalReason.SEVERAL_OBJECTS
+    assert frames.tracker.state is None
+
+
 def test_bad_frames_leave_the_track_alone():
     frames = Frames()
     frames(scene(OBJECT))

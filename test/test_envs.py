@@ -534,7 +534,7 @@ def test_max_joint_step_over_velocity_limit_refused():
 
 
 # ----------------------------------------------------------------------------- rewards / info
-REWARD_PARTS = ("reward_success", "reward_collision", "reward_progress", "reward_action")
+REWARD_PARTS = ("reward_success", "reward_collision", "reward_failure", "reward_progress", "reward_action")
 
 
 def check_info(reward, info):
@@ -569,16 +569,19 @@ def test_info_and_reward_parts(task):
 
 
 @pytest.mark.parametrize("task", TASKS)
-def test_sparse_reward_pays_only_success_and_collision(task):
-    env = make(task, reward={"mode": "sparse"})
+def test_sparse_reward_pays_only_success_and_failures(task):
+    env = make(task, reward={"mode": "sparse", "failure_penalty": 3.0})
     try:
         bonus, penalty = env.cfg["reward"]["success_bonus"], env.cfg["reward"]["collision_penalty"]
+        other = {None: 0.0, "collision": 0.0, "timeout": 0.0}  # any other failure pays failure_penalty
         rng = np.random.default_rng(4)
         env.reset(seed=0)
         seen = set()
 
         def check(reward, info):
-            expected = (bonus if info["is_success"] else 0.0) - (penalty if info["failure"] == "collision" else 0.0)
+            expected = ((bonus if info["is_success"] else 0.0) - (penalty if info["failure"] == "collision" else 0.0)
+                        - other.get(info["failure"], 3.0))
+            assert info["reward_failure"] == -other.get(info["failure"], 3.0)
             assert reward == expected, (reward, info)
             assert info["reward_progress"] == 0.0 and info["reward_action"] == 0.0
             seen.add(expected)
@@ -675,3 +678,21 @@ def test_plain_episode_share_draws_some_episodes_without_randomisation():
 
     with pytest.raises(ConfigError, match="plain_episode_share"):
         FR5Env(task="reach", config={"randomisation": {**perturbed, "plain_episode_share": 1.0}})
+
+
+def test_failure_penalty_is_paid_for_the_tasks_other_failures():
+    from fr5_rl.tasks.base import TaskOutcome
+
+    env = make("grasp", reward={"failure_penalty": 4.0})
+    try:
+        env.reset(seed=0)
+        terms = env.task.terms(env.task_state())
+        for failure, expected in ((None, 0.0), ("collision", 0.0), ("object_knocked_over", -4.0),
+                                  ("object_out_of_reach", -4.0), ("left_workspace", -4.0)):
+            parts = env.task.reward(TaskOutcome(False, failure, terms), [0.0] * 7)
+            assert parts["failure"] == expected, failure
+    finally:
+        env.close()
+    plain = make("grasp")
+    assert plain.task.failure_penalty == 0.0  # off unless configured
+    plain.close()

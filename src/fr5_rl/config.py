@@ -446,6 +446,30 @@ class CriticWarmupSettings:
 
 
 @dataclass(frozen=True)
+class ExpertStartSettings:
+    """``expert_start`` of a hyperparameter file: a reverse curriculum
+    (:mod:`fr5_rl.training.curriculum`). Each training episode starts after the scripted expert
+    has run ``k`` steps from the reset, the policy taking over there: ``k`` is drawn from the
+    last ``reach_back`` of ``max_steps``, first ``first_reach_back``. The reach-back grows by
+    ``step_back`` whenever the last ``window`` training episodes succeeded at a rate of
+    ``promote_at`` or more, up to 1, then once more to plain resets. Evaluation always starts
+    from plain resets."""
+
+    max_steps: int
+    first_reach_back: float
+    promote_at: float
+    window: int
+    step_back: float
+
+    def check(self, source: str) -> None:
+        _positive(source, **{"expert_start.max_steps": self.max_steps, "expert_start.window": self.window})
+        for name, value in (("first_reach_back", self.first_reach_back), ("promote_at", self.promote_at),
+                            ("step_back", self.step_back)):
+            if not 0.0 < value <= 1.0:
+                raise ConfigError(f"{source}: 'expert_start.{name}' must be in (0, 1], got {value!r}")
+
+
+@dataclass(frozen=True)
 class Hyperparameters:
     """``config/<algo>_<task>.yaml`` (rl-zoo style): everything a training run is made of.
 
@@ -460,6 +484,8 @@ class Hyperparameters:
     algo_kwargs: Dict[str, Any]
     # Fine-tuning (train.py --init-from) a model whose critic never learnt (e.g. DAgger's).
     critic_warmup: Optional[CriticWarmupSettings] = None
+    # Training episodes start part-way along the scripted expert's trajectories (a reverse curriculum).
+    expert_start: Optional[ExpertStartSettings] = None
 
     def check(self, source: str) -> None:
         _positive(source, n_timesteps=self.n_timesteps, n_envs=self.n_envs)

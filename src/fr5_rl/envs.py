@@ -31,7 +31,7 @@ from .tasks import GraspTask, ReachTask, Task, TaskOutcome, TaskState
 from .transforms import quaternion_z_axis
 
 TASKS = {"reach": ReachTask, "grasp": GraspTask}
-_REWARD_KEYS = {name: f"reward_{name}" for name in ("success", "collision", "progress", "action")}
+_REWARD_KEYS = {name: f"reward_{name}" for name in ("success", "collision", "failure", "progress", "action")}
 _TERM_KEYS = {name: f"term_{name}" for name in ("approach", "orientation", "gripper", "lift")}
 
 

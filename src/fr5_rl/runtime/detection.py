@@ -53,10 +53,13 @@ class Refusal:
 
     :param reason: the kind of problem.
     :param detail: what exactly, for the warning.
+    :param candidates: with ``SEVERAL_OBJECTS``, each candidate measured as if it were the
+        object, so a tracker that knows the object can tell it from pieces of the robot.
     """
 
     reason: RefusalReason
     detail: str = ""
+    candidates: Tuple["Detection", ...] = ()
 
     def __str__(self) -> str:
         return f"{self.reason.value}" + (f": {self.detail}" if self.detail else "")
@@ -365,14 +368,22 @@ class ObjectDetector:
                     rejected.append(f"{area * 1e4:.1f} cm^2")
                 continue
             candidates.append(index)
-        if len(candidates) > 1:
-            return Refusal(RefusalReason.SEVERAL_OBJECTS, f"{len(candidates)} candidates")
         if not candidates:
             if occluded:
                 return Refusal(RefusalReason.OCCLUDED, f"{occluded} piece(s) next to the robot")
             return Refusal(RefusalReason.NO_OBJECT, "pieces rejected: " + ", ".join(rejected) if rejected
                            else "only pieces too small to be the object")
-        index = candidates[0]
+        found = [self._measure(index, height, px, py, footprint, table_from_optical, intrinsics, w_img)
+                 for index in candidates]
+        if len(found) > 1:
+            return Refusal(RefusalReason.SEVERAL_OBJECTS, f"{len(found)} candidates", tuple(found))
+        return found[0]
+
+    def _measure(self, index: np.ndarray, height: np.ndarray, px: np.ndarray, py: np.ndarray,
+                 footprint: np.ndarray, table_from_optical: np.ndarray, intrinsics: Intrinsics,
+                 w_img: int) -> Detection:
+        """The :class:`Detection` of one candidate piece (flat indices into the region window)."""
+        s = self.settings
         heights = height.ravel()[index]
         top_level = float(np.percentile(heights, 90))
         top_face = index[heights >= top_level - s.top_tolerance]
@@ -577,7 +588,10 @@ class ObjectTracker:
     - not detected because something hides it (the refusal is OCCLUDED or NO_OBJECT, and where
       its top face was, the camera sees something in front of it rather than the bare table):
       its last position, for ``hidden_timeout`` after the last sighting (HIDDEN);
-    - otherwise: hold. Several candidates, a bare table where it stood, or a timeout drop the track.
+    - several candidates: those not the whole object (a top lower, higher, narrower or wider
+      than its own: finger tips, a part of it) are set aside, and the rest is judged as above;
+    - otherwise: hold. Several whole candidates, a bare table where it stood, or a timeout drop
+      the track.
 
     Nothing here knows the object's colour. Pure numpy; the node feeds it each frame's
     result, the tcp pose and the gripper opening.
@@ -634,6 +648,8 @@ class ObjectTracker:
             and table_from_optical is not None else None
         if self._in_tcp is not None:
             return self._follow_hand(result, stamp, look, tcp, gripper_width)
+        if self._position is not None and isinstance(result, Refusal) and result.candidates:
+            result = self._sort_out(result)
         if isinstance(result, Detection) and self._position is not None:
             partial = self._partial(result)
             if partial is not None:
@@ -707,6 +723,20 @@ class ObjectTracker:
             self._in_tcp = (np.linalg.inv(tcp) @ np.append(position, 1.0))[:3]
         self._top_height = self._rest[1] + float(position[2] - self._rest[0])
         self._position = position
+
+    def _sort_out(self, several: Refusal) -> Union[Detection, Refusal]:
+        """Several candidates while an object is tracked: finger tips lower than
+        ``max_object_height`` beside it, or pieces of it between the fingers, stand on the table
+        like objects. Those that are not the whole object (:meth:`_partial`) are not another
+        one: the one whole candidate is the object; none, and it is hidden among them; more
+        than one, and which is which cannot be told."""
+        whole = [c for c in several.candidates if self._partial(c) is None]
+        if len(whole) == 1:
+            return whole[0]
+        if not whole:
+            return Refusal(RefusalReason.OCCLUDED, f"{len(several.candidates)} pieces, none of them the whole "
+                                                   f"object: parts of it and of the fingers")
+        return several
 
     def _partial(self, detection: Detection) -> Optional[str]:
         """Why a detection cannot be the whole tracked object (its top lower or higher, or its

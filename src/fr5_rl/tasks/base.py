@@ -64,6 +64,7 @@ class Task:
         self.potential_gain = float(reward["potential_gain"])
         self.success_bonus = float(reward["success_bonus"])
         self.collision_penalty = float(reward["collision_penalty"])
+        self.failure_penalty = float(reward["failure_penalty"])
         self.action_penalty = float(reward["action_penalty"])
         self.sparse = reward["mode"] == "sparse"
         self._previous_potential: Optional[float] = None
@@ -83,17 +84,18 @@ class Task:
 
         Dense mode pays progress in the weighted shaping potential (potential-based shaping:
         it cannot be farmed by dawdling or ended early by crashing), plus the success bonus,
-        minus the collision penalty and a small action-magnitude cost. Sparse mode pays only
-        the bonus and the penalty.
+        minus the collision penalty, the penalty of the task's other failures and a small
+        action-magnitude cost. Sparse mode pays only the bonus and the penalties.
         """
         success = self.success_bonus if outcome.success else 0.0
         collision = -self.collision_penalty if outcome.failure == "collision" else 0.0
+        failure = -self.failure_penalty if outcome.failure not in (None, "collision") else 0.0
         if self.sparse:
-            return {"success": success, "collision": collision, "progress": 0.0, "action": 0.0}
+            return {"success": success, "collision": collision, "failure": failure, "progress": 0.0, "action": 0.0}
         potential = self.potential(outcome.terms)
         previous = potential if self._previous_potential is None else self._previous_potential
         self._previous_potential = potential
-        return {"success": success, "collision": collision,
+        return {"success": success, "collision": collision, "failure": failure,
                 "progress": self.potential_gain * (potential - previous),
                 "action": -self.action_penalty * sum([value * value for value in action])}
 

@@ -10,7 +10,7 @@ import csv
 import json
 import math
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -96,6 +96,29 @@ def format_count(value: float, _position: Any = None) -> str:
     return f"{value:.3g}"
 
 
+TRAINING_WINDOW = 500  # training episodes per point of the training-success curve
+
+
+def training_success(monitor_dir: Path) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+    """Training episodes' success, from a run's Monitor files: (environment steps at each
+    episode's end, success rate over the last :data:`TRAINING_WINDOW` episodes); None when
+    there are none. Episodes of all environments in the order they ended."""
+    episodes = []
+    for path in sorted(monitor_dir.glob("*.monitor.csv")) if monitor_dir.is_dir() else []:
+        with open(path, newline="", encoding="utf-8") as stream:
+            next(stream)  # the JSON header line
+            for row in csv.DictReader(stream):
+                episodes.append((float(row["t"]), int(row["l"]), row.get("is_success") == "True"))
+    if not episodes:
+        return None
+    episodes.sort()
+    steps = np.cumsum([length for _, length, _ in episodes])
+    success = np.array([ok for _, _, ok in episodes], dtype=float)
+    window = np.ones(min(TRAINING_WINDOW, len(success)))
+    rate = np.convolve(success, window, mode="full")[:len(success)] / np.minimum(np.arange(1, len(success) + 1), len(window))
+    return steps, rate
+
+
 def plot_learning_curve(run_dir: Path, out: Path) -> Path:
     """PNG of a run's evaluation success against training experience.
 
@@ -136,8 +159,22 @@ def plot_learning_curve(run_dir: Path, out: Path) -> Path:
         steps = data["timesteps"]
         fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
         if "successes" in data and len(data["successes"]):
-            ax[0].plot(steps, data["successes"].mean(axis=1) * 100.0, marker="o", ms=3)
-        ax[0].set(xlabel="environment steps", ylabel="evaluation success (%)", ylim=(-2, 102), title="success")
+            ax[0].plot(steps, data["successes"].mean(axis=1) * 100.0, marker="o", ms=3, label="evaluation (plain task)")
+        training = training_success(run_dir / "monitor")
+        if training is not None:
+            ax[0].plot(training[0], training[1] * 100.0, lw=1, alpha=0.7,
+                       label=f"training episodes (last {TRAINING_WINDOW})")
+        curriculum_path = run_dir / "curriculum.json"
+        if curriculum_path.is_file():
+            history = json.loads(curriculum_path.read_text()).get("history", [])
+            back = ax[0].twinx()
+            back.step([h["num_timesteps"] for h in history],
+                      [1.1 if h["reach_back"] is None else h["reach_back"] for h in history],
+                      where="post", color="grey", ls="--", lw=1)
+            back.set(ylim=(0, 1.15), ylabel="expert-start reach-back (1.1: plain)")
+        if training is not None or curriculum_path.is_file():
+            ax[0].legend(loc="upper left", fontsize=7)
+        ax[0].set(xlabel="environment steps", ylabel="success (%)", ylim=(-2, 102), title="success")
         ax[0].grid(alpha=0.3)
         ax[1].plot(steps, data["results"].mean(axis=1))
         ax[1].set(xlabel="environment steps", ylabel="mean evaluation return", title="return")

@@ -27,8 +27,13 @@ EVAL_SEED_OFFSET = 10_000  # evaluation seeds never overlap training seeds
 
 
 def make_env_factory(task: str, env_overrides: Dict[str, Any], seed: int, rank: int,
-                     monitor_dir: Optional[Path]):
-    """A picklable constructor for one (Monitor-wrapped) environment of a vectorised set."""
+                     monitor_dir: Optional[Path], expert_start_steps: int = 0):
+    """A picklable constructor for one (Monitor-wrapped) environment of a vectorised set.
+
+    :param expert_start_steps: > 0: episodes start after up to this many scripted-expert steps
+        (:class:`~fr5_rl.training.curriculum.ExpertStartWrapper`, inside the Monitor, so the
+        episode statistics are the policy's own).
+    """
 
     def _init():
         import multiprocessing
@@ -44,6 +49,10 @@ def make_env_factory(task: str, env_overrides: Dict[str, Any], seed: int, rank: 
         from ..envs import FR5Env
 
         env = FR5Env(task=task, config=env_overrides)
+        if expert_start_steps > 0:
+            from .curriculum import ExpertStartWrapper
+
+            env = ExpertStartWrapper(env, expert_start_steps)
         filename = str(monitor_dir / f"env{rank}") if monitor_dir is not None else None
         # Append when resuming; a new file needs its header (SB3 writes it only when overriding).
         fresh = filename is None or not Path(f"{filename}.{Monitor.EXT}").is_file()
@@ -66,7 +75,7 @@ def available_cores() -> int:
 
 def make_vec_env(task: str, env_overrides: Dict[str, Any], n_envs: int, seed: int,
                  monitor_dir: Optional[Path], subprocess: bool, start_method: str = "forkserver",
-                 processes: Optional[int] = None):
+                 processes: Optional[int] = None, expert_start_steps: int = 0):
     """``n_envs`` environments, stepped on ``processes`` cores when ``subprocess``.
 
     The environments are cut into one chunk per process: this process steps the first chunk,
@@ -78,12 +87,14 @@ def make_vec_env(task: str, env_overrides: Dict[str, Any], n_envs: int, seed: in
         a process that runs Ray's threads can hang.
     :param processes: processes stepping environments, this one included; default one per
         available core, at most ``n_envs``. One means a plain ``DummyVecEnv``.
+    :param expert_start_steps: see :func:`make_env_factory` (0: plain resets).
     """
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     from .vec_env import ChunkedSubprocVecEnv
 
-    factories = [make_env_factory(task, env_overrides, seed, rank, monitor_dir) for rank in range(n_envs)]
+    factories = [make_env_factory(task, env_overrides, seed, rank, monitor_dir, expert_start_steps)
+                 for rank in range(n_envs)]
     processes = min(processes or available_cores(), n_envs) if subprocess else 1
     if processes <= 1:
         return DummyVecEnv(factories)
@@ -228,7 +239,8 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
 
     venv = make_vec_env(args.task, env_overrides, args.n_envs, args.seed, run_dir / "monitor",
                         not args.no_subprocess, getattr(args, "start_method", "forkserver"),
-                        getattr(args, "processes", None))
+                        getattr(args, "processes", None),
+                        hyper.expert_start.max_steps if hyper.expert_start is not None else 0)
     eval_env = make_vec_env(args.task, env_overrides, 1, args.seed + EVAL_SEED_OFFSET, None, False)
     algo_cls = algorithm_class(args.algo)
     latest = run_dir / "checkpoints" / "latest"
@@ -267,6 +279,10 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
         from .callbacks import CriticWarmup
 
         callbacks.callbacks.insert(0, CriticWarmup(hyper.critic_warmup.steps, hyper.critic_warmup.learning_rate))
+    if hyper.expert_start is not None:
+        from .curriculum import ExpertStartCurriculum
+
+        callbacks.callbacks.insert(0, ExpertStartCurriculum(hyper.expert_start, run_dir))
     if extra_callbacks is not None:
         callbacks.callbacks.extend(extra_callbacks(run_dir, meta, summary))
     remaining = max(args.timesteps - int(model.num_timesteps), 0)

@@ -1,0 +1,142 @@
+"""A reverse curriculum from the scripted expert's trajectories, for learning grasp from reward.
+
+PPO from the plain start never lifts the cup: the first reward for a lift needs the tcp
+lowered round the cup, the fingers closed at the right moment and the arm raised, all by
+chance, and the cheaper thing learnt first is to rush in and topple it. Started part-way
+along a successful trajectory (the scripted expert's, run for a random number of steps after
+the reset), the policy meets the lift reward within its first episodes. The starts then move
+back toward the plain reset as it succeeds, until every episode is the task itself.
+
+The expert only sets the start state: no action of it is trained on, and what the policy
+learns comes from the reward of the steps it takes itself (evaluation uses plain resets).
+"""
+from __future__ import annotations
+
+import json
+from collections import deque
+from pathlib import Path
+from typing import Any, Deque, Dict, List, Optional, Tuple
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+
+from ..config import ExpertStartSettings
+from ..expert import ScriptedExpert
+
+STATE_FILE = "curriculum.json"
+
+
+class ExpertStartWrapper(gym.Wrapper):
+    """Each reset runs the scripted expert for ``k`` steps, ``k`` drawn uniformly from
+    ``[(1 - reach_back) * max_steps, max_steps]``; the policy's episode starts there.
+
+    ``reach_back`` 0 starts every episode where the expert is ``max_steps`` along; 1 draws
+    from the whole way back to the reset; None is the plain task (no prefix).
+
+    An expert prefix that ends the episode (success, or a failure it ran into) is not a
+    start: the environment is reset again and a shorter prefix drawn, below the step that
+    ended it (plain after ``retries``). The prefix's steps count toward the task's step limit,
+    as they would had the policy taken them.
+
+    :param env: an ``FR5Env`` (or a wrapper of one).
+    :param max_steps: the longest expert prefix (control periods): about where the expert
+        has the object lifted and is holding it.
+    :param reach_back: see above; set by the curriculum with :meth:`set_reach_back`.
+    """
+
+    retries = 3
+
+    def __init__(self, env: gym.Env, max_steps: int, reach_back: Optional[float] = 1.0) -> None:
+        super().__init__(env)
+        self.max_steps = int(max_steps)
+        self.reach_back: Optional[float] = None
+        self.set_reach_back(reach_back)
+        self.expert = ScriptedExpert(env)
+
+    def set_reach_back(self, reach_back: Optional[float]) -> None:
+        """:param reach_back: fraction of ``max_steps`` back from its end starts are drawn from
+        (clipped to [0, 1]), or None for plain resets."""
+        self.reach_back = None if reach_back is None else min(max(float(reach_back), 0.0), 1.0)
+
+    def prefix_range(self) -> Tuple[int, int]:
+        """The expert steps drawn from, both ends included ((0, 0): plain resets)."""
+        if self.reach_back is None:
+            return 0, 0
+        return int(round((1.0 - self.reach_back) * self.max_steps)), self.max_steps
+
+    def reset(self, **kwargs: Any) -> Tuple[np.ndarray, Dict[str, Any]]:
+        observation, info = self.env.reset(**kwargs)
+        low, high = self.prefix_range()
+        for attempt in range(self.retries + 1):
+            prefix = int(self.env.unwrapped.np_random.integers(low, high + 1)) if high > 0 else 0
+            self.expert.reset()
+            for taken in range(prefix):
+                observation, _, terminated, truncated, _ = self.env.step(self.expert.act(observation))
+                if terminated or truncated:
+                    break
+            else:
+                return observation, dict(info, expert_steps=prefix)
+            observation, info = self.env.reset()
+            high = taken if attempt < self.retries - 1 else 0
+            low = min(low, high)
+        return observation, dict(info, expert_steps=0)
+
+
+class ExpertStartCurriculum(BaseCallback):
+    """Moves the expert-prefixed starts back as training episodes succeed.
+
+    Starts are first drawn from the last ``first_reach_back`` of the expert's prefix (the cup
+    about to be lifted or held up). Over the last ``window`` finished training episodes (each
+    counted by its final ``info['is_success']``), a success rate of at least ``promote_at``
+    adds ``step_back`` to the reach-back in every environment, up to 1 (starts anywhere from
+    the reset on), then once more to the plain task; the window starts over at each step. The
+    state and its history are written to ``run_dir/curriculum.json`` at each change, so a
+    resumed run continues from it and the learning curve can draw it.
+
+    :param settings: the ``expert_start`` section of the hyperparameter file.
+    :param run_dir: the run directory (None: nothing written).
+    """
+
+    def __init__(self, settings: ExpertStartSettings, run_dir: Optional[Path] = None, verbose: int = 0) -> None:
+        super().__init__(verbose)
+        self.settings = settings
+        self.run_dir = run_dir
+        self.reach_back: Optional[float] = settings.first_reach_back
+        self.outcomes: Deque[bool] = deque(maxlen=settings.window)
+        # Every change: {"reach_back", "num_timesteps"} (for the learning curve).
+        self.history: List[Dict[str, Any]] = []
+
+    def _on_training_start(self) -> None:
+        path = None if self.run_dir is None else self.run_dir / STATE_FILE
+        if path is not None and path.is_file():
+            saved = json.loads(path.read_text())
+            self.reach_back, self.history = saved["reach_back"], saved.get("history", [])
+        elif not self.history:
+            self._record()
+        self._apply()
+
+    def _record(self) -> None:
+        self.history.append({"reach_back": self.reach_back, "num_timesteps": int(self.num_timesteps)})
+        if self.run_dir is not None:
+            (self.run_dir / STATE_FILE).write_text(json.dumps(
+                {"reach_back": self.reach_back, "num_timesteps": int(self.num_timesteps), "history": self.history}))
+
+    def _apply(self) -> None:
+        self.training_env.env_method("set_reach_back", self.reach_back)
+
+    def _on_step(self) -> bool:
+        for info, done in zip(self.locals["infos"], self.locals["dones"]):
+            if done:
+                self.outcomes.append(bool(info.get("is_success", False)))
+        s = self.settings
+        if self.reach_back is not None and len(self.outcomes) == s.window and np.mean(self.outcomes) >= s.promote_at:
+            self.reach_back = None if self.reach_back >= 1.0 else min(round(self.reach_back + s.step_back, 6), 1.0)
+            self.outcomes.clear()
+            self._apply()
+            self._record()
+            if self.verbose:
+                print(f"curriculum: reach_back {self.reach_back} at {self.num_timesteps} steps")
+        # Plain resets logged as reach-back 1 + step_back: one curve that ends above 1.
+        self.logger.record("curriculum/reach_back", 1.0 + s.step_back if self.reach_back is None else self.reach_back)
+        return True

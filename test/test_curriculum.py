@@ -1,0 +1,175 @@
+"""The reverse curriculum of expert-prefixed starts (training/curriculum.py) and its wiring into train.py."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fr5_rl.cli import train
+from fr5_rl.config import ConfigError, ExpertStartSettings
+from fr5_rl.envs import FR5Env
+from fr5_rl.training.algorithms import load_hyperparameters
+from fr5_rl.training.curriculum import STATE_FILE, ExpertStartCurriculum, ExpertStartWrapper
+
+GRASP_PPO = """\
+n_timesteps: 1024
+n_envs: 2
+normalize: {norm_obs: true, norm_reward: false, clip_obs: 10.0}
+env: {}
+algo_kwargs:
+  policy: MlpPolicy
+  n_steps: 256
+  batch_size: 128
+  n_epochs: 1
+  policy_kwargs:
+    net_arch: {pi: [16], vf: [16]}
+"""
+
+
+@pytest.fixture(scope="module")
+def grasp_env():
+    env = ExpertStartWrapper(FR5Env("grasp"), max_steps=70)
+    yield env
+    env.close()
+
+
+def test_no_reach_back_is_the_plain_reset(grasp_env):
+    plain = FR5Env("grasp")
+    try:
+        grasp_env.set_reach_back(None)
+        observation, info = grasp_env.reset(seed=5)
+        expected, _ = plain.reset(seed=5)
+        assert info["expert_steps"] == 0
+        np.testing.assert_array_equal(observation, expected)
+    finally:
+        plain.close()
+
+
+def test_starts_lie_along_the_experts_trajectory(grasp_env):
+    grasp_env.set_reach_back(1.0)
+    grasp_env.reset(seed=11)
+    prefixes, lifted = [], 0
+    for _ in range(24):
+        observation, info = grasp_env.reset()
+        env = grasp_env.unwrapped
+        prefixes.append(info["expert_steps"])
+        assert 0 <= info["expert_steps"] <= 70
+        assert env._steps == info["expert_steps"]  # the prefix counts toward the step limit
+        state = env.task_state()
+        lifted += state.object_position[2] - state.object_start_position[2] > 0.02
+        # The observation returned is the state the policy starts from, and the episode goes on.
+        np.testing.assert_allclose(observation, env._observe()[1], atol=1e-6)
+        _, _, terminated, truncated, _ = grasp_env.step(np.zeros(7, dtype=np.float32))
+        assert not truncated
+    assert len(set(prefixes)) > 10  # drawn, not fixed
+    assert lifted >= 3  # the late starts hold the cup up already: the lift reward is near
+
+
+def test_a_short_reach_back_starts_near_the_end(grasp_env):
+    grasp_env.set_reach_back(0.2)
+    assert grasp_env.prefix_range() == (56, 70)
+    grasp_env.reset(seed=12)
+    for _ in range(6):
+        _, info = grasp_env.reset()
+        assert 56 <= info["expert_steps"] <= 70, info
+        state = grasp_env.unwrapped.task_state()
+        assert state.fingers_object_contact == 2  # the expert holds the cup by then
+
+
+def test_a_prefix_that_would_end_the_episode_is_drawn_shorter():
+    env = ExpertStartWrapper(FR5Env("grasp"), max_steps=250)  # longer than the expert's ~80-step solve
+    try:
+        env.reset(seed=3)
+        for _ in range(12):
+            _, info = env.reset()
+            assert info["expert_steps"] < 100
+            assert env.unwrapped.task.lifted_time < env.unwrapped.task.hold_time
+    finally:
+        env.close()
+
+
+def test_the_curriculum_moves_starts_back_and_resumes(tmp_path):
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    venv = DummyVecEnv([lambda: ExpertStartWrapper(FR5Env("grasp"), 70) for _ in range(2)])
+    try:
+        from stable_baselines3.common.logger import configure
+
+        model = PPO("MlpPolicy", venv, n_steps=64, batch_size=64, device="cpu")
+        model.set_logger(configure(None, []))
+        settings = ExpertStartSettings(max_steps=70, first_reach_back=0.25, promote_at=0.75, window=4, step_back=0.25)
+        callback = ExpertStartCurriculum(settings, tmp_path)
+        callback.init_callback(model)
+        callback.on_training_start({}, {})
+        assert venv.get_attr("reach_back") == [0.25, 0.25]
+
+        def episodes(*successes):
+            for success in successes:
+                callback.update_locals({"infos": [{"is_success": success}, {}], "dones": np.array([True, False])})
+                callback.on_step()
+
+        episodes(True, False, False, False)  # 1 in 4: stays
+        assert callback.reach_back == 0.25
+        episodes(True, True, False, True)  # the window holds the last 4: 3 of them succeeded at the last
+        assert callback.reach_back == 0.5 and venv.get_attr("reach_back") == [0.5, 0.5]
+        assert json.loads((tmp_path / STATE_FILE).read_text())["reach_back"] == 0.5
+        episodes(True, True, True)  # a fresh window: 3 episodes are not enough
+        assert callback.reach_back == 0.5
+        for _ in range(2):
+            episodes(True, True, True, True)
+        assert callback.reach_back == 1.0  # starts anywhere from the reset on
+        episodes(True, True, True, True)
+        assert callback.reach_back is None and venv.get_attr("reach_back") == [None, None]  # the plain task
+        episodes(True, True, True, True)
+        assert callback.reach_back is None
+        saved = json.loads((tmp_path / STATE_FILE).read_text())
+        assert saved["reach_back"] is None
+        assert [h["reach_back"] for h in saved["history"]] == [0.25, 0.5, 0.75, 1.0, None]
+
+        resumed = ExpertStartCurriculum(settings, tmp_path)
+        venv.env_method("set_reach_back", 1.0)
+        resumed.init_callback(model)
+        resumed.on_training_start({}, {})
+        assert resumed.reach_back is None and venv.get_attr("reach_back") == [None, None]
+    finally:
+        venv.close()
+
+
+def test_expert_start_settings_are_checked(tmp_path):
+    for bad, key in (("{max_steps: 0, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 0.1}", "max_steps"),
+                     ("{max_steps: 70, first_reach_back: 0.0, promote_at: 0.5, window: 10, step_back: 0.1}", "first_reach_back"),
+                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.0, window: 10, step_back: 0.1}", "promote_at"),
+                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 1.5}", "step_back"),
+                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.5, window: 10}", "expert_start")):
+        path = tmp_path / "bad.yaml"
+        path.write_text(GRASP_PPO + f"expert_start: {bad}\n")
+        with pytest.raises(ConfigError, match=key):
+            load_hyperparameters("ppo", "grasp", str(path))
+
+
+def test_train_runs_with_expert_starts(tmp_path):
+    hyperparams = tmp_path / "ppo_grasp.yaml"
+    hyperparams.write_text(GRASP_PPO + "expert_start: {max_steps: 70, first_reach_back: 0.3, promote_at: 0.5, window: 20, step_back: 0.1}\n")
+    run_dir = tmp_path / "run"
+    code = train.main(["--task", "grasp", "--hyperparams", str(hyperparams), "--no-subprocess", "--no-progress",
+                       "--eval-freq", "512", "--eval-episodes", "1", "--run-dir", str(run_dir)])
+    assert code == 0
+    config = json.loads((run_dir / "config.json").read_text())
+    assert config["hyperparams_resolved"]["expert_start"]["max_steps"] == 70
+    # The curriculum ran in the training loop (its fraction is logged every step).
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    (logs,) = (run_dir / "tb").iterdir()
+    events = EventAccumulator(str(logs))
+    events.Reload()
+    assert [value.value for value in events.Scalars("curriculum/reach_back")][0] == pytest.approx(0.3)
+    assert json.loads((run_dir / STATE_FILE).read_text())["history"][0]["reach_back"] == pytest.approx(0.3)
+    # Its learning curve draws evaluation, training episodes and the reach-back.
+    from fr5_rl.training.evaluation import plot_learning_curve, training_success
+
+    steps, rate = training_success(run_dir / "monitor")
+    assert steps[-1] <= 1024 and len(steps) == len(rate) and ((rate >= 0) & (rate <= 1)).all()
+    assert plot_learning_curve(run_dir, tmp_path / "curve.png").stat().st_size > 10_000
