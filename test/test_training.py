@@ -519,6 +519,6 @@ def test_critic_warmup_settings_are_checked(tmp_path):
 
 def test_init_from_refuses_another_task(ppo_run, tmp_path, capsys):
     code = train.main(["--task", "grasp", "--init-from", str(ppo_run / "checkpoints" / "latest"), "--timesteps",
-                       "256", "--n-envs", "1", "--no-subprocess", "--no-progress", "--run-dir", str(tmp_path / "r")])
+                       "256", "--n-envs", "2", "--no-subprocess", "--no-progress", "--run-dir", str(tmp_path / "r")])
     assert code == 2
     assert "task is 'reach'" in capsys.readouterr().err
