@@ -1,31 +1,15 @@
-"""The reverse curriculum of expert-prefixed starts (training/curriculum.py) and its wiring into train.py."""
+"""The reverse curriculum of expert-prefixed starts (training/curriculum.py); its wiring into train.py is in
+test_training.py."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from fr5_rl.cli import train
-from fr5_rl.config import ConfigError, ExpertStartSettings
+from fr5_rl.config import ExpertStartSettings
 from fr5_rl.envs import FR5Env
-from fr5_rl.training.algorithms import load_hyperparameters
 from fr5_rl.training.curriculum import STATE_FILE, ExpertStartCurriculum, ExpertStartWrapper
-
-GRASP_PPO = """\
-n_timesteps: 1024
-n_envs: 2
-normalize: {norm_obs: true, norm_reward: false, clip_obs: 10.0}
-env: {}
-algo_kwargs:
-  policy: MlpPolicy
-  n_steps: 256
-  batch_size: 128
-  n_epochs: 1
-  policy_kwargs:
-    net_arch: {pi: [16], vf: [16]}
-"""
 
 
 @pytest.fixture(scope="module")
@@ -136,40 +120,3 @@ def test_the_curriculum_moves_starts_back_and_resumes(tmp_path):
         assert resumed.reach_back is None and venv.get_attr("reach_back") == [None, None]
     finally:
         venv.close()
-
-
-def test_expert_start_settings_are_checked(tmp_path):
-    for bad, key in (("{max_steps: 0, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 0.1}", "max_steps"),
-                     ("{max_steps: 70, first_reach_back: 0.0, promote_at: 0.5, window: 10, step_back: 0.1}", "first_reach_back"),
-                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.0, window: 10, step_back: 0.1}", "promote_at"),
-                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 1.5}", "step_back"),
-                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.5, window: 10}", "expert_start")):
-        path = tmp_path / "bad.yaml"
-        path.write_text(GRASP_PPO + f"expert_start: {bad}\n")
-        with pytest.raises(ConfigError, match=key):
-            load_hyperparameters("ppo", "grasp", str(path))
-
-
-def test_train_runs_with_expert_starts(tmp_path):
-    hyperparams = tmp_path / "ppo_grasp.yaml"
-    hyperparams.write_text(GRASP_PPO + "expert_start: {max_steps: 70, first_reach_back: 0.3, promote_at: 0.5, window: 20, step_back: 0.1}\n")
-    run_dir = tmp_path / "run"
-    code = train.main(["--task", "grasp", "--hyperparams", str(hyperparams), "--no-subprocess", "--no-progress",
-                       "--eval-freq", "512", "--eval-episodes", "1", "--run-dir", str(run_dir)])
-    assert code == 0
-    config = json.loads((run_dir / "config.json").read_text())
-    assert config["hyperparams_resolved"]["expert_start"]["max_steps"] == 70
-    # The curriculum ran in the training loop (its fraction is logged every step).
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
-    (logs,) = (run_dir / "tb").iterdir()
-    events = EventAccumulator(str(logs))
-    events.Reload()
-    assert [value.value for value in events.Scalars("curriculum/reach_back")][0] == pytest.approx(0.3)
-    assert json.loads((run_dir / STATE_FILE).read_text())["history"][0]["reach_back"] == pytest.approx(0.3)
-    # Its learning curve draws evaluation, training episodes and the reach-back.
-    from fr5_rl.training.evaluation import plot_learning_curve, training_success
-
-    steps, rate = training_success(run_dir / "monitor")
-    assert steps[-1] <= 1024 and len(steps) == len(rate) and ((rate >= 0) & (rate <= 1)).all()
-    assert plot_learning_curve(run_dir, tmp_path / "curve.png").stat().st_size > 10_000

@@ -22,6 +22,7 @@ from fr5_rl.config import ConfigError, package_root
 from fr5_rl.cli import evaluate, train
 from fr5_rl.training import evaluation
 from fr5_rl.training.algorithms import check_hyperparameters, load_hyperparameters
+from fr5_rl.training.curriculum import STATE_FILE
 from fr5_rl.runtime.bundle import ModelFilesError
 
 REPO = Path(__file__).resolve().parent.parent
@@ -522,3 +523,40 @@ def test_init_from_refuses_another_task(ppo_run, tmp_path, capsys):
                        "256", "--n-envs", "2", "--no-subprocess", "--no-progress", "--run-dir", str(tmp_path / "r")])
     assert code == 2
     assert "task is 'reach'" in capsys.readouterr().err
+
+
+def test_expert_start_settings_are_checked(tmp_path):
+    for bad, key in (("{max_steps: 0, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 0.1}", "max_steps"),
+                     ("{max_steps: 70, first_reach_back: 0.0, promote_at: 0.5, window: 10, step_back: 0.1}", "first_reach_back"),
+                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.0, window: 10, step_back: 0.1}", "promote_at"),
+                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 1.5}", "step_back"),
+                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.5, window: 10}", "expert_start")):
+        path = tmp_path / "bad.yaml"
+        write(path, FAST_PPO + f"expert_start: {bad}\n")
+        with pytest.raises(ConfigError, match=key):
+            load_hyperparameters("ppo", "grasp", str(path))
+
+
+def test_train_runs_with_expert_starts(tmp_path):
+    hyperparams = write(tmp_path / "ppo_grasp.yaml", FAST_PPO + "expert_start: {max_steps: 70, first_reach_back: 0.3, "
+                                                                  "promote_at: 0.5, window: 20, step_back: 0.1}\n")
+    run_dir = tmp_path / "run"
+    code = train.main(["--task", "grasp", "--hyperparams", str(hyperparams), "--timesteps", "1024", "--no-subprocess",
+                       "--no-progress", "--eval-freq", "512", "--eval-episodes", "1", "--run-dir", str(run_dir)])
+    assert code == 0
+    config = read_json(run_dir / "config.json")
+    assert config["hyperparams_resolved"]["expert_start"]["max_steps"] == 70
+    # The curriculum ran in the training loop (its reach-back is logged every rollout).
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    (logs,) = (run_dir / "tb").iterdir()
+    events = EventAccumulator(str(logs))
+    events.Reload()
+    assert [value.value for value in events.Scalars("curriculum/reach_back")][0] == pytest.approx(0.3)
+    assert read_json(run_dir / STATE_FILE)["history"][0]["reach_back"] == pytest.approx(0.3)
+    # Its learning curve draws evaluation, training episodes and the reach-back.
+    from fr5_rl.training.evaluation import plot_learning_curve, training_success
+
+    steps, rate = training_success(run_dir / "monitor")
+    assert steps[-1] <= 1024 and len(steps) == len(rate) and ((rate >= 0) & (rate <= 1)).all()
+    assert plot_learning_curve(run_dir, tmp_path / "curve.png").stat().st_size > 10_000

@@ -36,7 +36,7 @@ class ExpertStartWrapper(gym.Wrapper):
 
     An expert prefix that ends the episode (success, or a failure it ran into) is not a
     start: the environment is reset again and a shorter prefix drawn, below the step that
-    ended it (plain after ``retries``). The prefix's steps count toward the task's step limit,
+    ended it; after ``retries`` such prefixes, the episode starts plain. The prefix's steps count toward the task's step limit,
     as they would had the policy taken them.
 
     :param env: an ``FR5Env`` (or a wrapper of one).
@@ -68,8 +68,8 @@ class ExpertStartWrapper(gym.Wrapper):
     def reset(self, **kwargs: Any) -> Tuple[np.ndarray, Dict[str, Any]]:
         observation, info = self.env.reset(**kwargs)
         low, high = self.prefix_range()
-        for attempt in range(self.retries + 1):
-            prefix = int(self.env.unwrapped.np_random.integers(low, high + 1)) if high > 0 else 0
+        for _ in range(self.retries):
+            prefix = int(self.env.unwrapped.np_random.integers(low, high + 1))
             self.expert.reset()
             for taken in range(prefix):
                 observation, _, terminated, truncated, _ = self.env.step(self.expert.act(observation))
@@ -78,7 +78,7 @@ class ExpertStartWrapper(gym.Wrapper):
             else:
                 return observation, dict(info, expert_steps=prefix)
             observation, info = self.env.reset()
-            high = taken if attempt < self.retries - 1 else 0
+            high = taken  # the step that ended it was step taken + 1
             low = min(low, high)
         return observation, dict(info, expert_steps=0)
 
@@ -137,6 +137,9 @@ class ExpertStartCurriculum(BaseCallback):
             self._record()
             if self.verbose:
                 print(f"curriculum: reach_back {self.reach_back} at {self.num_timesteps} steps")
-        # Plain resets logged as reach-back 1 + step_back: one curve that ends above 1.
-        self.logger.record("curriculum/reach_back", 1.0 + s.step_back if self.reach_back is None else self.reach_back)
         return True
+
+    def _on_rollout_end(self) -> None:
+        # Plain resets logged as reach-back 1 + step_back: one curve that ends above 1.
+        self.logger.record("curriculum/reach_back",
+                           1.0 + self.settings.step_back if self.reach_back is None else self.reach_back)
