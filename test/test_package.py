@@ -27,6 +27,26 @@ def test_launch_file_parses_with_roslaunch(launch):
     assert config.nodes, f"{launch.name} starts no node"
 
 
+def test_the_vision_launch_arguments_set_the_cameras_parameters():
+    """``camera_profile`` loads config/camera_<profile>.yaml over camera.yaml; ``camera_rate``
+    overrides whichever rate that leaves (as a float, the node's type)."""
+    import roslaunch.config
+    import roslaunch.xmlloader
+
+    def camera_params(*args):
+        config = roslaunch.config.ROSLaunchConfig()
+        loader = roslaunch.xmlloader.XmlLoader()
+        loader.load(str(ROOT / "launch" / "sim_policy.launch"), config, verbose=False,
+                    argv=["sim_policy.launch", "vision:=true", "rviz:=false", *args])
+        return {key.rsplit("/", 1)[1]: param.value for key, param in config.params.items() if key.startswith("/camera/")}
+
+    assert (camera_params()["width"], camera_params()["rate"]) == (640, 15.0)
+    profile = camera_params("camera_profile:=320x240")
+    assert (profile["width"], profile["renderer"], profile["rate"]) == (320, "tiny", 15.0)
+    slower = camera_params("camera_profile:=320x240", "camera_rate:=10")
+    assert slower["width"] == 320 and slower["rate"] == 10.0 and isinstance(slower["rate"], float)
+
+
 def test_every_script_is_a_thin_installed_entry_point():
     cmake = (ROOT / "CMakeLists.txt").read_text()
     for script in sorted((ROOT / "scripts").glob("*.py")):

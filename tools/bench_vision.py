@@ -35,11 +35,13 @@ TARGETS = {"detection_p95_mm": 5.0, "latency_slack_ms": 10.0, "reach_success": 0
            "camera_hz": 10.0, "joint_states_hz": 100.0}
 
 
-def camera_config(profile: str) -> Dict[str, Any]:
-    """config/camera.yaml, with config/camera_<profile>.yaml on top when a profile is given."""
+def camera_config(profile: str, rate: Optional[float] = None) -> Dict[str, Any]:
+    """config/camera.yaml, with config/camera_<profile>.yaml on top when a profile is given, and
+    ``rate`` (Hz) on top of both when given."""
     from fr5_rl.config import load_yaml
 
-    return {**load_yaml("camera"), **(load_yaml(f"camera_{profile}") if profile else {})}
+    return {**load_yaml("camera"), **(load_yaml(f"camera_{profile}") if profile else {}),
+            **({"rate": float(rate)} if rate else {})}
 
 
 def offline(placements: int, noise: float, renderers: List[str], frames: int, profile: str = "") -> Dict[str, Any]:
@@ -130,14 +132,15 @@ def offline(placements: int, noise: float, renderers: List[str], frames: int, pr
     return result
 
 
-def closed_loop(model: str, task: str, episodes: int, seed: int, port: int, profile: str = "") -> Dict[str, Any]:
+def closed_loop(model: str, task: str, episodes: int, seed: int, port: int, profile: str = "",
+                rate: Optional[float] = None) -> Dict[str, Any]:
     """``sim_policy.launch vision:=true`` headless; success, rates and latency seen from outside."""
     env = dict(os.environ, ROS_MASTER_URI=f"http://localhost:{port}")
     os.environ["ROS_MASTER_URI"] = env["ROS_MASTER_URI"]
     launch = subprocess.Popen(
         ["roslaunch", "-p", str(port), "fr5_rl", "sim_policy.launch", "rviz:=false", "vision:=true",
          f"model:={model}", f"task:={task}", f"episodes:={episodes}", f"seed:={seed}", "backend:=onnx",
-         f"camera_profile:={profile}"],
+         f"camera_profile:={profile}", f"camera_rate:={rate or ''}"],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, start_new_session=True)
     import rospy
     from geometry_msgs.msg import PoseStamped
@@ -258,21 +261,25 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--results", type=Path, default=RESULTS_DIR)
     parser.add_argument("--camera-profile", default="", help="config/camera_<profile>.yaml on top of camera.yaml "
                                                                "(e.g. 320x240); results go to vision_<profile>.json")
+    parser.add_argument("--camera-rate", type=float, help="the camera's frame rate (Hz) instead of the profile's; "
+                                                          "results go to vision[_<profile>]_<rate>hz.json")
     parser.add_argument("--tasks", default="reach,grasp", help="closed-loop tasks to run")
     parser.add_argument("--loop", choices=["reach", "grasp"], help=argparse.SUPPRESS)
     parser.add_argument("--loop-out", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.loop:
         args.loop_out.write_text(json.dumps(closed_loop(f"models/{args.loop}", args.loop, args.episodes, args.seed,
-                                                        args.port, args.camera_profile)))
+                                                        args.port, args.camera_profile, args.camera_rate)))
         return 0
     if args.quick:
         args.placements, args.episodes = 20, 3
     machine = machine_info()
     profile = args.camera_profile
+    rate = args.camera_rate
     result: Dict[str, Any] = {"quick": args.quick, "camera_profile": profile or "default",
+                              "camera_rate_hz": float(camera_config(profile, rate)["rate"]),
                               "offline": offline(args.placements, args.noise, ["tiny", "egl"], 22, profile)}
-    camera_period_ms = 1000.0 / float(camera_config(profile)["rate"])
+    camera_period_ms = 1000.0 / float(camera_config(profile, rate)["rate"])
     tasks = [task for task in ("reach", "grasp") if task in args.tasks.split(",")]
     args.results.mkdir(parents=True, exist_ok=True)
     if not args.skip_ros:
@@ -281,7 +288,8 @@ def main(argv: Optional[List[str]] = None) -> int:
             out = args.results / f".vision_{task}.json"
             subprocess.run([sys.executable, __file__, "--loop", task, "--loop-out", str(out), "--episodes",
                             str(args.episodes), "--seed", str(args.seed), "--port", str(args.port + offset),
-                            "--camera-profile", profile], check=True)
+                            "--camera-profile", profile] + (["--camera-rate", str(rate)] if rate else []),
+                           check=True)
             result[task] = json.loads(out.read_text())
             out.unlink()
     verdicts = {"detection_p95_mm": verdict(result["offline"]["exact_depth"]["error_p95_mm"],
@@ -304,7 +312,8 @@ def main(argv: Optional[List[str]] = None) -> int:
                                                   "", f"{task} success through vision")
     for v in verdicts.values():
         print(f"  {v['text']}")
-    path = write_result(args.results / (f"vision_{profile}.json" if profile else "vision.json"), result, verdicts,
+    name = "_".join(["vision"] + ([profile] if profile else []) + ([f"{rate:g}hz"] if rate else []))
+    path = write_result(args.results / f"{name}.json", result, verdicts,
                         machine)
     summary = update_summary(args.results, path.stem, path)
     print(f"wrote {os.path.relpath(path)}, {os.path.relpath(summary)}")
