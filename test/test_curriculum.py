@@ -62,6 +62,32 @@ def test_a_short_reach_back_starts_near_the_end(grasp_env):
         assert state.fingers_object_contact == 2  # the expert holds the cup by then
 
 
+def test_frontier_draws_start_furthest_back_and_are_marked():
+    env = ExpertStartWrapper(FR5Env("grasp"), max_steps=70, frontier_steps=7, frontier_share=0.5)
+    try:
+        env.set_reach_back(0.5)
+        assert env.prefix_range() == (35, 70) and env.frontier_end() == 42
+        env.reset(seed=21)
+        prefixes, marks = [], []
+        for _ in range(24):
+            _, info = env.reset()
+            assert 35 <= info["expert_steps"] <= 70
+            assert info["frontier_start"] == (info["expert_steps"] <= 42)
+            prefixes.append(info["expert_steps"])
+            # Every step of the episode carries how it began (the curriculum reads the last one).
+            _, _, _, _, step_info = env.step(np.zeros(7, dtype=np.float32))
+            marks.append(step_info["frontier_start"])
+            assert step_info["expert_steps"] == info["expert_steps"]
+        # Half the draws from a fifth of the range: far more than a uniform draw's fifth lands there.
+        assert 0.35 <= np.mean(marks) <= 0.9
+        assert max(prefixes) > 42  # the rest of the range is still drawn
+        env.set_reach_back(None)
+        _, info = env.reset()
+        assert info["expert_steps"] == 0 and info["frontier_start"]
+    finally:
+        env.close()
+
+
 def test_a_prefix_that_would_end_the_episode_is_drawn_shorter():
     env = ExpertStartWrapper(FR5Env("grasp"), max_steps=250)  # longer than the expert's ~80-step solve
     try:
@@ -84,18 +110,22 @@ def test_the_curriculum_moves_starts_back_and_resumes(tmp_path):
 
         model = PPO("MlpPolicy", venv, n_steps=64, batch_size=64, device="cpu")
         model.set_logger(configure(None, []))
-        settings = ExpertStartSettings(max_steps=70, first_reach_back=0.25, promote_at=0.75, window=4, step_back=0.25)
+        settings = ExpertStartSettings(max_steps=70, first_reach_back=0.25, promote_at=0.75, window=4, step_back=0.25,
+                                       frontier_share=0.5)
         callback = ExpertStartCurriculum(settings, tmp_path)
         callback.init_callback(model)
         callback.on_training_start({}, {})
         assert venv.get_attr("reach_back") == [0.25, 0.25]
 
-        def episodes(*successes):
+        def episodes(*successes, frontier=True):
             for success in successes:
-                callback.update_locals({"infos": [{"is_success": success}, {}], "dones": np.array([True, False])})
+                callback.update_locals({"infos": [{"is_success": success, "frontier_start": frontier}, {}],
+                                        "dones": np.array([True, False])})
                 callback.on_step()
 
         episodes(True, False, False, False)  # 1 in 4: stays
+        assert callback.reach_back == 0.25
+        episodes(True, True, True, True, frontier=False)  # later, easier starts do not count
         assert callback.reach_back == 0.25
         episodes(True, True, False, True)  # the window holds the last 4: 3 of them succeeded at the last
         assert callback.reach_back == 0.5 and venv.get_attr("reach_back") == [0.5, 0.5]

@@ -526,10 +526,11 @@ def test_init_from_refuses_another_task(ppo_run, tmp_path, capsys):
 
 
 def test_expert_start_settings_are_checked(tmp_path):
-    for bad, key in (("{max_steps: 0, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 0.1}", "max_steps"),
-                     ("{max_steps: 70, first_reach_back: 0.0, promote_at: 0.5, window: 10, step_back: 0.1}", "first_reach_back"),
-                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.0, window: 10, step_back: 0.1}", "promote_at"),
-                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 1.5}", "step_back"),
+    for bad, key in (("{max_steps: 0, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 0.1, frontier_share: 0.5}", "max_steps"),
+                     ("{max_steps: 70, first_reach_back: 0.0, promote_at: 0.5, window: 10, step_back: 0.1, frontier_share: 0.5}", "first_reach_back"),
+                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.0, window: 10, step_back: 0.1, frontier_share: 0.5}", "promote_at"),
+                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 1.5, frontier_share: 0.5}", "step_back"),
+                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 0.1, frontier_share: 1.5}", "frontier_share"),
                      ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.5, window: 10}", "expert_start")):
         path = tmp_path / "bad.yaml"
         write(path, FAST_PPO + f"expert_start: {bad}\n")
@@ -539,7 +540,8 @@ def test_expert_start_settings_are_checked(tmp_path):
 
 def test_train_runs_with_expert_starts(tmp_path):
     hyperparams = write(tmp_path / "ppo_grasp.yaml", FAST_PPO + "expert_start: {max_steps: 70, first_reach_back: 0.3, "
-                                                                  "promote_at: 0.5, window: 20, step_back: 0.1}\n")
+                                                                  "promote_at: 0.5, window: 20, step_back: 0.1, "
+                                                                  "frontier_share: 0.5}\n")
     run_dir = tmp_path / "run"
     code = train.main(["--task", "grasp", "--hyperparams", str(hyperparams), "--timesteps", "1024", "--no-subprocess",
                        "--no-progress", "--eval-freq", "512", "--eval-episodes", "1", "--run-dir", str(run_dir)])

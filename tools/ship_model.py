@@ -68,7 +68,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         return "ship_model.py: evaluation failed"
 
     if (run_dir / "eval" / "evaluations.npz").is_file() or summary.get("method") == "dagger":
-        out = plot_learning_curve(run_dir, REPO / "docs" / f"learning_curve_{meta['task']}.png")
+        out = plot_learning_curve(run_dir, REPO / "docs" / f"learning_curve_{args.target.name}.png")
         print(f"wrote {out}")
     return 0
 

@@ -450,16 +450,22 @@ class ExpertStartSettings:
     """``expert_start`` of a hyperparameter file: a reverse curriculum
     (:mod:`fr5_rl.training.curriculum`). Each training episode starts after the scripted expert
     has run ``k`` steps from the reset, the policy taking over there: ``k`` is drawn from the
-    last ``reach_back`` of ``max_steps``, first ``first_reach_back``. The reach-back grows by
-    ``step_back`` whenever the last ``window`` training episodes succeeded at a rate of
-    ``promote_at`` or more, up to 1, then once more to plain resets. Evaluation always starts
-    from plain resets."""
+    last ``reach_back`` of ``max_steps``, first ``first_reach_back``; a share
+    ``frontier_share`` of the starts is drawn from the frontier, the first ``step_back`` of
+    that range. The reach-back grows by ``step_back`` whenever the last ``window`` training
+    episodes begun at the frontier succeeded at a rate of ``promote_at`` or more, up to 1, then
+    once more to plain resets. Evaluation always starts from plain resets."""
 
     max_steps: int
     first_reach_back: float
     promote_at: float
     window: int
     step_back: float
+    frontier_share: float
+
+    def frontier_steps(self) -> int:
+        """The frontier's length in expert steps (at least one)."""
+        return max(int(round(self.step_back * self.max_steps)), 1)
 
     def check(self, source: str) -> None:
         _positive(source, **{"expert_start.max_steps": self.max_steps, "expert_start.window": self.window})
@@ -467,6 +473,8 @@ class ExpertStartSettings:
                             ("step_back", self.step_back)):
             if not 0.0 < value <= 1.0:
                 raise ConfigError(f"{source}: 'expert_start.{name}' must be in (0, 1], got {value!r}")
+        if not 0.0 <= self.frontier_share <= 1.0:
+            raise ConfigError(f"{source}: 'expert_start.frontier_share' must be in [0, 1], got {self.frontier_share!r}")
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,12 @@ class ExpertStartWrapper(gym.Wrapper):
     ``reach_back`` 0 starts every episode where the expert is ``max_steps`` along; 1 draws
     from the whole way back to the reset; None is the plain task (no prefix).
 
+    The frontier is the first ``frontier_steps`` of that range: the starts furthest back, new
+    since the last step back. A share ``frontier_share`` of the resets draws there, so the
+    hardest starts are practised most; every step's info says the episode's ``expert_steps``
+    and whether it began at the frontier (``frontier_start``, also true of any start further
+    back), which is what the curriculum judges by.
+
     An expert prefix that ends the episode (success, or a failure it ran into) is not a
     start: the environment is reset again and a shorter prefix drawn, below the step that
     ended it; after ``retries`` such prefixes, the episode starts plain. The prefix's steps count toward the task's step limit,
@@ -43,16 +49,22 @@ class ExpertStartWrapper(gym.Wrapper):
     :param max_steps: the longest expert prefix (control periods): about where the expert
         has the object lifted and is holding it.
     :param reach_back: see above; set by the curriculum with :meth:`set_reach_back`.
+    :param frontier_steps: length of the frontier (expert steps; 0: no frontier draws).
+    :param frontier_share: share of the resets drawn from the frontier, in [0, 1].
     """
 
     retries = 3
 
-    def __init__(self, env: gym.Env, max_steps: int, reach_back: Optional[float] = 1.0) -> None:
+    def __init__(self, env: gym.Env, max_steps: int, reach_back: Optional[float] = 1.0, frontier_steps: int = 0,
+                 frontier_share: float = 0.0) -> None:
         super().__init__(env)
         self.max_steps = int(max_steps)
+        self.frontier_steps = int(frontier_steps)
+        self.frontier_share = float(frontier_share)
         self.reach_back: Optional[float] = None
         self.set_reach_back(reach_back)
         self.expert = ScriptedExpert(env)
+        self.episode_start: Dict[str, Any] = {"expert_steps": 0, "frontier_start": True}
 
     def set_reach_back(self, reach_back: Optional[float]) -> None:
         """:param reach_back: fraction of ``max_steps`` back from its end starts are drawn from
@@ -65,32 +77,51 @@ class ExpertStartWrapper(gym.Wrapper):
             return 0, 0
         return int(round((1.0 - self.reach_back) * self.max_steps)), self.max_steps
 
+    def frontier_end(self) -> int:
+        """The last expert step of the frontier: starts at or before it are frontier starts."""
+        low, high = self.prefix_range()
+        return min(low + self.frontier_steps, high)
+
     def reset(self, **kwargs: Any) -> Tuple[np.ndarray, Dict[str, Any]]:
         observation, info = self.env.reset(**kwargs)
+        random = self.env.unwrapped.np_random
         low, high = self.prefix_range()
+        frontier_end = self.frontier_end()
+        if self.reach_back is not None and self.frontier_share > 0.0 and random.random() < self.frontier_share:
+            high = frontier_end
+        prefix = 0
         for _ in range(self.retries):
-            prefix = int(self.env.unwrapped.np_random.integers(low, high + 1))
+            prefix = int(random.integers(low, high + 1))
             self.expert.reset()
             for taken in range(prefix):
                 observation, _, terminated, truncated, _ = self.env.step(self.expert.act(observation))
                 if terminated or truncated:
                     break
             else:
-                return observation, dict(info, expert_steps=prefix)
+                break
             observation, info = self.env.reset()
             high = taken  # the step that ended it was step taken + 1
             low = min(low, high)
-        return observation, dict(info, expert_steps=0)
+            prefix = 0
+        self.episode_start = {"expert_steps": prefix, "frontier_start": prefix <= frontier_end}
+        return observation, dict(info, **self.episode_start)
+
+    def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        return observation, reward, terminated, truncated, dict(info, **self.episode_start)
 
 
 class ExpertStartCurriculum(BaseCallback):
     """Moves the expert-prefixed starts back as training episodes succeed.
 
     Starts are first drawn from the last ``first_reach_back`` of the expert's prefix (the cup
-    about to be lifted or held up). Over the last ``window`` finished training episodes (each
-    counted by its final ``info['is_success']``), a success rate of at least ``promote_at``
-    adds ``step_back`` to the reach-back in every environment, up to 1 (starts anywhere from
-    the reset on), then once more to the plain task; the window starts over at each step. The
+    about to be lifted or held up). Over the last ``window`` finished training episodes that
+    began at the frontier (each counted by its final ``info['is_success']``), a success rate
+    of at least ``promote_at`` adds ``step_back`` to the reach-back in every environment, up
+    to 1 (starts anywhere from the reset on), then once more to the plain task; the window
+    starts over at each step. Judging the frontier alone matters: over all starts, the easy
+    late ones carried the rate past ``promote_at`` while starts from the reset never succeeded,
+    and the plain task was reached with 0 % success from it. The
     state and its history are written to ``run_dir/curriculum.json`` at each change, so a
     resumed run continues from it and the learning curve can draw it.
 
@@ -127,7 +158,7 @@ class ExpertStartCurriculum(BaseCallback):
 
     def _on_step(self) -> bool:
         for info, done in zip(self.locals["infos"], self.locals["dones"]):
-            if done:
+            if done and info.get("frontier_start", True):
                 self.outcomes.append(bool(info.get("is_success", False)))
         s = self.settings
         if self.reach_back is not None and len(self.outcomes) == s.window and np.mean(self.outcomes) >= s.promote_at:

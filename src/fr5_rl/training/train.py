@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Callable, Dict, Optional, Sequence
 
 
-from ..config import ConfigError, Hyperparameters, load_yaml, typed
+from ..config import ConfigError, ExpertStartSettings, Hyperparameters, load_yaml, typed
 from ..runtime.bundle import (MODEL_FILE, STATS_FILE, algorithm_class, build_meta, check_files_present,
                               check_sb3_zip, damaged, machine_description, read_meta, recover_model_dir,
                               save_model_dir, write_json_atomic)
@@ -27,12 +27,12 @@ EVAL_SEED_OFFSET = 10_000  # evaluation seeds never overlap training seeds
 
 
 def make_env_factory(task: str, env_overrides: Dict[str, Any], seed: int, rank: int,
-                     monitor_dir: Optional[Path], expert_start_steps: int = 0):
+                     monitor_dir: Optional[Path], expert_start: Optional[ExpertStartSettings] = None):
     """A picklable constructor for one (Monitor-wrapped) environment of a vectorised set.
 
-    :param expert_start_steps: > 0: episodes start after up to this many scripted-expert steps
+    :param expert_start: episodes start part-way along the scripted expert's trajectories
         (:class:`~fr5_rl.training.curriculum.ExpertStartWrapper`, inside the Monitor, so the
-        episode statistics are the policy's own).
+        episode statistics are the policy's own); None: plain resets.
     """
 
     def _init():
@@ -49,10 +49,11 @@ def make_env_factory(task: str, env_overrides: Dict[str, Any], seed: int, rank: 
         from ..envs import FR5Env
 
         env = FR5Env(task=task, config=env_overrides)
-        if expert_start_steps > 0:
+        if expert_start is not None:
             from .curriculum import ExpertStartWrapper
 
-            env = ExpertStartWrapper(env, expert_start_steps)
+            env = ExpertStartWrapper(env, expert_start.max_steps, frontier_steps=expert_start.frontier_steps(),
+                                     frontier_share=expert_start.frontier_share)
         filename = str(monitor_dir / f"env{rank}") if monitor_dir is not None else None
         # Append when resuming; a new file needs its header (SB3 writes it only when overriding).
         fresh = filename is None or not Path(f"{filename}.{Monitor.EXT}").is_file()
@@ -75,7 +76,7 @@ def available_cores() -> int:
 
 def make_vec_env(task: str, env_overrides: Dict[str, Any], n_envs: int, seed: int,
                  monitor_dir: Optional[Path], subprocess: bool, start_method: str = "forkserver",
-                 processes: Optional[int] = None, expert_start_steps: int = 0):
+                 processes: Optional[int] = None, expert_start: Optional[ExpertStartSettings] = None):
     """``n_envs`` environments, stepped on ``processes`` cores when ``subprocess``.
 
     The environments are cut into one chunk per process: this process steps the first chunk,
@@ -87,13 +88,13 @@ def make_vec_env(task: str, env_overrides: Dict[str, Any], n_envs: int, seed: in
         a process that runs Ray's threads can hang.
     :param processes: processes stepping environments, this one included; default one per
         available core, at most ``n_envs``. One means a plain ``DummyVecEnv``.
-    :param expert_start_steps: see :func:`make_env_factory` (0: plain resets).
+    :param expert_start: see :func:`make_env_factory` (None: plain resets).
     """
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     from .vec_env import ChunkedSubprocVecEnv
 
-    factories = [make_env_factory(task, env_overrides, seed, rank, monitor_dir, expert_start_steps)
+    factories = [make_env_factory(task, env_overrides, seed, rank, monitor_dir, expert_start)
                  for rank in range(n_envs)]
     processes = min(processes or available_cores(), n_envs) if subprocess else 1
     if processes <= 1:
@@ -239,8 +240,7 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
 
     venv = make_vec_env(args.task, env_overrides, args.n_envs, args.seed, run_dir / "monitor",
                         not args.no_subprocess, getattr(args, "start_method", "forkserver"),
-                        getattr(args, "processes", None),
-                        hyper.expert_start.max_steps if hyper.expert_start is not None else 0)
+                        getattr(args, "processes", None), hyper.expert_start)
     eval_env = make_vec_env(args.task, env_overrides, 1, args.seed + EVAL_SEED_OFFSET, None, False)
     algo_cls = algorithm_class(args.algo)
     latest = run_dir / "checkpoints" / "latest"
