@@ -62,28 +62,31 @@ def test_a_short_reach_back_starts_near_the_end(grasp_env):
         assert state.fingers_object_contact == 2  # the expert holds the cup by then
 
 
-def test_frontier_draws_start_furthest_back_and_are_marked():
-    env = ExpertStartWrapper(FR5Env("grasp"), max_steps=70, frontier_steps=7, frontier_share=0.5)
+def test_frontier_draws_start_furthest_back_and_are_reported():
+    env = ExpertStartWrapper(FR5Env("grasp"), max_steps=70, frontier_share=0.5)
     try:
-        env.set_reach_back(0.5)
-        assert env.prefix_range() == (35, 70) and env.frontier_end() == 42
+        env.set_reach_back(0.5, frontier_end=42)  # the level before drew from 42 on
+        assert env.prefix_range() == (35, 70)
         env.reset(seed=21)
-        prefixes, marks = [], []
+        prefixes = []
         for _ in range(24):
             _, info = env.reset()
             assert 35 <= info["expert_steps"] <= 70
-            assert info["frontier_start"] == (info["expert_steps"] <= 42)
             prefixes.append(info["expert_steps"])
-            # Every step of the episode carries how it began (the curriculum reads the last one).
+            # Only the episode's last step reports how it began (the env step stays as it was).
             _, _, _, _, step_info = env.step(np.zeros(7, dtype=np.float32))
-            marks.append(step_info["frontier_start"])
-            assert step_info["expert_steps"] == info["expert_steps"]
+            assert "expert_steps" not in step_info
         # Half the draws from a fifth of the range: far more than a uniform draw's fifth lands there.
-        assert 0.35 <= np.mean(marks) <= 0.9
-        assert max(prefixes) > 42  # the rest of the range is still drawn
+        assert 0.35 <= np.mean(np.array(prefixes) < 42) <= 0.9
+        assert max(prefixes) >= 42  # the rest of the range is still drawn
         env.set_reach_back(None)
         _, info = env.reset()
-        assert info["expert_steps"] == 0 and info["frontier_start"]
+        assert info["expert_steps"] == 0
+        done = False
+        while not done:
+            _, _, terminated, truncated, step_info = env.step(np.zeros(7, dtype=np.float32))
+            done = terminated or truncated
+        assert step_info["expert_steps"] == 0
     finally:
         env.close()
 
@@ -117,19 +120,25 @@ def test_the_curriculum_moves_starts_back_and_resumes(tmp_path):
         callback.on_training_start({}, {})
         assert venv.get_attr("reach_back") == [0.25, 0.25]
 
-        def episodes(*successes, frontier=True):
+        def episodes(*successes, expert_steps=None):
             for success in successes:
-                callback.update_locals({"infos": [{"is_success": success, "frontier_start": frontier}, {}],
+                # A start at the current level's first prefix (its frontier) unless told otherwise.
+                level = callback.reach_back or 1.0  # the plain task: prefix 0
+                steps = round((1 - level) * 70) if expert_steps is None else expert_steps
+                callback.update_locals({"infos": [{"is_success": success, "expert_steps": steps}, {}],
                                         "dones": np.array([True, False])})
                 callback.on_step()
 
         episodes(True, False, False, False)  # 1 in 4: stays
         assert callback.reach_back == 0.25
-        episodes(True, True, True, True, frontier=False)  # later, easier starts do not count
-        assert callback.reach_back == 0.25
         episodes(True, True, False, True)  # the window holds the last 4: 3 of them succeeded at the last
         assert callback.reach_back == 0.5 and venv.get_attr("reach_back") == [0.5, 0.5]
         assert json.loads((tmp_path / STATE_FILE).read_text())["reach_back"] == 0.5
+        assert callback.frontier_end == 52 and venv.get_attr("frontier_end") == [52, 52]
+        # Episodes begun at the first level (prefixes 52-70) end after the step back: later,
+        # easier starts than the new frontier (35-51), they do not count.
+        episodes(True, True, True, True, expert_steps=52)
+        assert callback.reach_back == 0.5
         episodes(True, True, True)  # a fresh window: 3 episodes are not enough
         assert callback.reach_back == 0.5
         for _ in range(2):
@@ -148,5 +157,11 @@ def test_the_curriculum_moves_starts_back_and_resumes(tmp_path):
         resumed.init_callback(model)
         resumed.on_training_start({}, {})
         assert resumed.reach_back is None and venv.get_attr("reach_back") == [None, None]
+        # Resumed mid-way, the frontier is again what the last step back added.
+        (tmp_path / STATE_FILE).write_text(json.dumps({"reach_back": 0.75, "history": saved["history"][:3]}))
+        resumed = ExpertStartCurriculum(settings, tmp_path)
+        resumed.init_callback(model)
+        resumed.on_training_start({}, {})
+        assert venv.get_attr("reach_back") == [0.75, 0.75] and venv.get_attr("frontier_end") == [35, 35]
     finally:
         venv.close()

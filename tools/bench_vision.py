@@ -276,10 +276,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     machine = machine_info()
     profile = args.camera_profile
     rate = args.camera_rate
+    camera_hz_configured = float(camera_config(profile, rate)["rate"])
     result: Dict[str, Any] = {"quick": args.quick, "camera_profile": profile or "default",
-                              "camera_rate_hz": float(camera_config(profile, rate)["rate"]),
+                              "camera_rate_hz": camera_hz_configured,
                               "offline": offline(args.placements, args.noise, ["tiny", "egl"], 22, profile)}
-    camera_period_ms = 1000.0 / float(camera_config(profile, rate)["rate"])
+    camera_period_ms = 1000.0 / camera_hz_configured
     tasks = [task for task in ("reach", "grasp") if task in args.tasks.split(",")]
     args.results.mkdir(parents=True, exist_ok=True)
     if not args.skip_ros:

@@ -451,10 +451,11 @@ class ExpertStartSettings:
     (:mod:`fr5_rl.training.curriculum`). Each training episode starts after the scripted expert
     has run ``k`` steps from the reset, the policy taking over there: ``k`` is drawn from the
     last ``reach_back`` of ``max_steps``, first ``first_reach_back``; a share
-    ``frontier_share`` of the starts is drawn from the frontier, the first ``step_back`` of
-    that range. The reach-back grows by ``step_back`` whenever the last ``window`` training
-    episodes begun at the frontier succeeded at a rate of ``promote_at`` or more, up to 1, then
-    once more to plain resets. Evaluation always starts from plain resets."""
+    ``frontier_share`` of the starts is drawn from the frontier, the starts new since the last
+    step back (:class:`fr5_rl.training.curriculum.ExpertStartCurriculum`). The reach-back grows by
+    ``step_back`` whenever the last ``window`` training episodes begun at the frontier
+    succeeded at a rate of ``promote_at`` or more, up to 1, then once more to plain resets.
+    Evaluation always starts from plain resets."""
 
     max_steps: int
     first_reach_back: float
@@ -462,10 +463,6 @@ class ExpertStartSettings:
     window: int
     step_back: float
     frontier_share: float
-
-    def frontier_steps(self) -> int:
-        """The frontier's length in expert steps (at least one)."""
-        return max(int(round(self.step_back * self.max_steps)), 1)
 
     def check(self, source: str) -> None:
         _positive(source, **{"expert_start.max_steps": self.max_steps, "expert_start.window": self.window})

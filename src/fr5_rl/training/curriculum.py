@@ -25,6 +25,13 @@ from ..config import ExpertStartSettings
 from ..expert import ScriptedExpert
 
 STATE_FILE = "curriculum.json"
+# The plain task as a reach-back level, in logs and plots: one curve that ends above 1.
+PLAIN_LEVEL = 1.1
+
+
+def first_prefix(reach_back: float, max_steps: int) -> int:
+    """The shortest expert prefix drawn at ``reach_back`` (the start furthest back)."""
+    return int(round((1.0 - reach_back) * max_steps))
 
 
 class ExpertStartWrapper(gym.Wrapper):
@@ -34,62 +41,57 @@ class ExpertStartWrapper(gym.Wrapper):
     ``reach_back`` 0 starts every episode where the expert is ``max_steps`` along; 1 draws
     from the whole way back to the reset; None is the plain task (no prefix).
 
-    The frontier is the first ``frontier_steps`` of that range: the starts furthest back, new
-    since the last step back. A share ``frontier_share`` of the resets draws there, so the
-    hardest starts are practised most; every step's info says the episode's ``expert_steps``
-    and whether it began at the frontier (``frontier_start``, also true of any start further
-    back), which is what the curriculum judges by.
+    The frontier is where that range begins, below ``frontier_end``: the starts furthest back,
+    new since the curriculum's last step back. A share ``frontier_share`` of the resets draws
+    there, so the hardest starts are practised most. The info of an episode's last step says
+    its ``expert_steps``, from which the curriculum tells frontier starts.
 
     An expert prefix that ends the episode (success, or a failure it ran into) is not a
     start: the environment is reset again and a shorter prefix drawn, below the step that
-    ended it; after ``retries`` such prefixes, the episode starts plain. The prefix's steps count toward the task's step limit,
-    as they would had the policy taken them.
+    ended it; after ``retries`` such prefixes, the episode starts plain. The prefix's steps
+    count toward the task's step limit, as they would had the policy taken them.
 
     :param env: an ``FR5Env`` (or a wrapper of one).
     :param max_steps: the longest expert prefix (control periods): about where the expert
         has the object lifted and is holding it.
     :param reach_back: see above; set by the curriculum with :meth:`set_reach_back`.
-    :param frontier_steps: length of the frontier (expert steps; 0: no frontier draws).
     :param frontier_share: share of the resets drawn from the frontier, in [0, 1].
     """
 
     retries = 3
 
-    def __init__(self, env: gym.Env, max_steps: int, reach_back: Optional[float] = 1.0, frontier_steps: int = 0,
+    def __init__(self, env: gym.Env, max_steps: int, reach_back: Optional[float] = 1.0,
                  frontier_share: float = 0.0) -> None:
         super().__init__(env)
         self.max_steps = int(max_steps)
-        self.frontier_steps = int(frontier_steps)
         self.frontier_share = float(frontier_share)
         self.reach_back: Optional[float] = None
+        self.frontier_end = self.max_steps + 1
         self.set_reach_back(reach_back)
         self.expert = ScriptedExpert(env)
-        self.episode_start: Dict[str, Any] = {"expert_steps": 0, "frontier_start": True}
+        self.prefix = 0
 
-    def set_reach_back(self, reach_back: Optional[float]) -> None:
+    def set_reach_back(self, reach_back: Optional[float], frontier_end: Optional[int] = None) -> None:
         """:param reach_back: fraction of ``max_steps`` back from its end starts are drawn from
-        (clipped to [0, 1]), or None for plain resets."""
+            (clipped to [0, 1]), or None for plain resets.
+        :param frontier_end: the frontier's first prefix not in it: the previous level's first
+            prefix (None: the whole range is new)."""
         self.reach_back = None if reach_back is None else min(max(float(reach_back), 0.0), 1.0)
+        self.frontier_end = self.max_steps + 1 if frontier_end is None else int(frontier_end)
 
     def prefix_range(self) -> Tuple[int, int]:
         """The expert steps drawn from, both ends included ((0, 0): plain resets)."""
         if self.reach_back is None:
             return 0, 0
-        return int(round((1.0 - self.reach_back) * self.max_steps)), self.max_steps
-
-    def frontier_end(self) -> int:
-        """The last expert step of the frontier: starts at or before it are frontier starts."""
-        low, high = self.prefix_range()
-        return min(low + self.frontier_steps, high)
+        return first_prefix(self.reach_back, self.max_steps), self.max_steps
 
     def reset(self, **kwargs: Any) -> Tuple[np.ndarray, Dict[str, Any]]:
         observation, info = self.env.reset(**kwargs)
         random = self.env.unwrapped.np_random
         low, high = self.prefix_range()
-        frontier_end = self.frontier_end()
         if self.reach_back is not None and self.frontier_share > 0.0 and random.random() < self.frontier_share:
-            high = frontier_end
-        prefix = 0
+            high = max(min(self.frontier_end - 1, high), low)
+        self.prefix = 0
         for _ in range(self.retries):
             prefix = int(random.integers(low, high + 1))
             self.expert.reset()
@@ -98,17 +100,18 @@ class ExpertStartWrapper(gym.Wrapper):
                 if terminated or truncated:
                     break
             else:
+                self.prefix = prefix
                 break
             observation, info = self.env.reset()
             high = taken  # the step that ended it was step taken + 1
             low = min(low, high)
-            prefix = 0
-        self.episode_start = {"expert_steps": prefix, "frontier_start": prefix <= frontier_end}
-        return observation, dict(info, **self.episode_start)
+        return observation, dict(info, expert_steps=self.prefix)
 
     def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:
         observation, reward, terminated, truncated, info = self.env.step(action)
-        return observation, reward, terminated, truncated, dict(info, **self.episode_start)
+        if terminated or truncated:  # what the curriculum reads; nothing added to the other steps
+            info = dict(info, expert_steps=self.prefix)
+        return observation, reward, terminated, truncated, info
 
 
 class ExpertStartCurriculum(BaseCallback):
@@ -137,6 +140,7 @@ class ExpertStartCurriculum(BaseCallback):
         self.outcomes: Deque[bool] = deque(maxlen=settings.window)
         # Every change: {"reach_back", "num_timesteps"} (for the learning curve).
         self.history: List[Dict[str, Any]] = []
+        self.frontier_end: Optional[int] = None  # set with each level (_apply)
 
     def _on_training_start(self) -> None:
         path = None if self.run_dir is None else self.run_dir / STATE_FILE
@@ -154,23 +158,27 @@ class ExpertStartCurriculum(BaseCallback):
                 {"reach_back": self.reach_back, "num_timesteps": int(self.num_timesteps), "history": self.history}))
 
     def _apply(self) -> None:
-        self.training_env.env_method("set_reach_back", self.reach_back)
+        # The frontier: the starts this level adds to the one before (none before: all of them).
+        previous = self.history[-2]["reach_back"] if len(self.history) >= 2 else None
+        self.frontier_end = None if previous is None else first_prefix(previous, self.settings.max_steps)
+        self.training_env.env_method("set_reach_back", self.reach_back, self.frontier_end)
 
     def _on_step(self) -> bool:
-        for info, done in zip(self.locals["infos"], self.locals["dones"]):
-            if done and info.get("frontier_start", True):
-                self.outcomes.append(bool(info.get("is_success", False)))
         s = self.settings
-        if self.reach_back is not None and len(self.outcomes) == s.window and np.mean(self.outcomes) >= s.promote_at:
+        if self.reach_back is None:
+            return True
+        # An episode begun before the last step back started at or after the frontier's end.
+        for info, done in zip(self.locals["infos"], self.locals["dones"]):
+            if done and (self.frontier_end is None or info.get("expert_steps", 0) < self.frontier_end):
+                self.outcomes.append(bool(info.get("is_success", False)))
+        if len(self.outcomes) == s.window and np.mean(self.outcomes) >= s.promote_at:
             self.reach_back = None if self.reach_back >= 1.0 else min(round(self.reach_back + s.step_back, 6), 1.0)
             self.outcomes.clear()
-            self._apply()
             self._record()
+            self._apply()
             if self.verbose:
                 print(f"curriculum: reach_back {self.reach_back} at {self.num_timesteps} steps")
         return True
 
     def _on_rollout_end(self) -> None:
-        # Plain resets logged as reach-back 1 + step_back: one curve that ends above 1.
-        self.logger.record("curriculum/reach_back",
-                           1.0 + self.settings.step_back if self.reach_back is None else self.reach_back)
+        self.logger.record("curriculum/reach_back", PLAIN_LEVEL if self.reach_back is None else self.reach_back)

@@ -167,12 +167,14 @@ def plot_learning_curve(run_dir: Path, out: Path) -> Path:
         curriculum_path = run_dir / "curriculum.json"
         history = json.loads(curriculum_path.read_text()).get("history", []) if curriculum_path.is_file() else []
         if history:
-            levels = [1.1 if h["reach_back"] is None else h["reach_back"] for h in history]
+            from .curriculum import PLAIN_LEVEL
+
+            levels = [PLAIN_LEVEL if h["reach_back"] is None else h["reach_back"] for h in history]
             changes = [h["num_timesteps"] for h in history]
             last_step = max([*changes, *steps, *(training[0][-1:] if training is not None else [])])
             back = ax[0].twinx()  # each level holds until the next change, the last to the run's end
             back.step(changes + [last_step], levels + levels[-1:], where="post", color="grey", ls="--", lw=1)
-            back.set(ylim=(0, 1.15), ylabel="expert-start reach-back (1.1: plain)")
+            back.set(ylim=(0, PLAIN_LEVEL + 0.05), ylabel=f"expert-start reach-back ({PLAIN_LEVEL:g}: plain)")
         if training is not None or history:
             ax[0].legend(loc="upper left", fontsize=7)
         ax[0].set(xlabel="environment steps", ylabel="success (%)", ylim=(-2, 102), title="success")
