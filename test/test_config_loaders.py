@@ -88,6 +88,15 @@ def test_period_timing_ranges_are_checked(key, value):
         load_env_config({"randomisation": {key: value}})
 
 
+@pytest.mark.parametrize("value", [-1, 5, 1.5, True, "2"])
+def test_previous_actions_must_be_a_small_whole_number(value):
+    from fr5_rl.config import load_env_config
+
+    with pytest.raises(ConfigError, match="previous_actions"):
+        load_env_config({"observation": {"previous_actions": value}})
+    assert load_env_config({"observation": {"previous_actions": 3}})["observation"]["previous_actions"] == 3
+
+
 def test_whole_multiple():
     from fr5_rl.config import whole_multiple
 

@@ -354,3 +354,76 @@ def test_reading_carries_the_oldest_arm_stamp():
     assert reader.reading().stamp == pytest.approx(5.02)
     reader.update(list(ROBOT.joint_names), [0.0] * 6, [], 0.0, NOW)  # a driver without stamps
     assert reader.reading().stamp == 0.0
+
+
+# ----------------------------------------------------------------------------- previous actions
+class ScriptedPolicy(Policy):
+    """Returns the given actions one after the other and records what it was shown."""
+
+    backend = "scripted"
+
+    def __init__(self, actions, task, observation_size):
+        super().__init__({"task": task, "algo": "ppo", "observation_size": observation_size, "action_size": 7})
+        self.actions = list(actions)
+        self.seen = []
+
+    def _act(self, observation):
+        self.seen.append(observation)
+        return np.asarray(self.actions[len(self.seen) - 1], dtype=np.float64)
+
+
+@pytest.mark.parametrize("latency", [0, 2])
+def test_the_step_observes_the_actions_it_sent_as_the_environment_does(latency):
+    """With ``observation.previous_actions``, the node's observation is the environment's, period
+    by period, fed the same states and actions; with latency too (the block holds what was
+    sent, not what the arm is doing yet)."""
+    import gymnasium as gym
+
+    import fr5_rl  # noqa: F401  (registers the environments)
+
+    overrides = {"observation": {"previous_actions": 3}, "randomisation": {
+        "enabled": True, "action_latency_steps": [latency, latency], "object_size_scale": [1, 1],
+        "object_mass_scale": [1, 1], "friction_scale": [1, 1], "joint_damping": [0, 0]}}
+    env_cfg = load_env_config(overrides)
+    env = gym.make("FR5Grasp-v0", config=overrides).unwrapped
+    actions = np.random.default_rng(7).uniform(-1.2, 1.2, (8, 7))  # some beyond +-1: clipped by both
+    policy = ScriptedPolicy(actions, "grasp", 24 + 18)
+    step = DeploymentStep(policy, ROBOT, env_cfg, joint_state_timeout=0.1, target_timeout=0.5)
+    observation, _ = env.reset(seed=3)
+    for period, action in enumerate(actions):
+        state = env.task_state()
+        joints = Reading(ArmJointState(np.asarray(state.joint_positions), np.asarray(state.joint_velocities),
+                                       state.gripper_width), NOW)
+        command = step(StepInputs(NOW, joints, Reading(tuple(state.object_position), NOW)))
+        assert isinstance(command, Command), command
+        np.testing.assert_allclose(policy.seen[period], observation, atol=1e-6, err_msg=f"period {period}")
+        observation, *_ = env.step(action)
+    sent = np.clip(actions[-3:, :6], -1, 1)[::-1].reshape(-1)
+    np.testing.assert_allclose(observation[24:], sent, atol=1e-7)
+    env.close()
+
+
+def test_a_hold_clears_the_previous_actions():
+    """After a hold the arm stood still: the block reads zeros again, as at an episode start."""
+    env_cfg = load_env_config({"observation": {"previous_actions": 2}})
+    policy = ScriptedPolicy([[0.5] * 7] * 3, "reach", 23 + 12)
+    step = DeploymentStep(policy, ROBOT, env_cfg, joint_state_timeout=0.1, target_timeout=0.5)
+    step(inputs())
+    step(inputs())
+    np.testing.assert_allclose(policy.seen[1][23:], [0.5] * 6 + [0.0] * 6)
+    assert isinstance(step(inputs(target=None)), Hold)
+    step(inputs())
+    np.testing.assert_allclose(policy.seen[2][23:], [0.0] * 12)
+
+
+def test_an_evaluation_keeps_the_settings_the_policy_depends_on_and_nothing_else():
+    """evaluate.py runs the registered task: the training's randomisation and reward go, the
+    observation and action settings stay (or the environment would build what the policy cannot take)."""
+    meta = {"task": "grasp", "algo": "ppo", "observation_size": 42, "action_size": 7, "env_overrides": {
+        "observation": {"previous_actions": 3}, "action": {"smoothing_alpha": 0.6},
+        "simulation": {"control_dt": 0.02, "physics_dt": 0.004}, "reward": {"failure_penalty": 10.0},
+        "randomisation": {"enabled": True, "action_latency_steps": [0, 2]}}}
+    assert Policy(meta).deployment_overrides() == {"observation": {"previous_actions": 3},
+                                                   "action": {"smoothing_alpha": 0.6},
+                                                   "simulation": {"control_dt": 0.02}}
+    assert Policy({**meta, "env_overrides": {}}).deployment_overrides() == {}

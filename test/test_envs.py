@@ -680,6 +680,28 @@ def test_plain_episode_share_draws_some_episodes_without_randomisation():
         FR5Env(task="reach", config={"randomisation": {**perturbed, "plain_episode_share": 1.0}})
 
 
+def test_timing_share_leaves_some_perturbed_episodes_with_whole_step_latency_only():
+    """randomisation.timing_share: that share of the perturbed episodes gets the in-period timing
+    (command delay, observation age); the others keep their latency but no timing, so that "no
+    jitter" never means "no latency" to the policy."""
+    from fr5_rl.config import ConfigError
+    from fr5_rl.envs import FR5Env
+
+    perturbed = {"enabled": True, "action_latency_steps": [2, 2], "command_delay_s": [0.0, 0.02],
+                 "observation_age_s": [0.0, 0.01]}
+    env = FR5Env(task="reach", config={"randomisation": {**perturbed, "timing_share": 0.5}})
+    drawn = []
+    for seed in range(60):
+        env.reset(seed=seed)
+        drawn.append((env._latency_steps, env._command_delay_range, env._observation_age_range))
+    env.close()
+    assert set(drawn) == {(2, (0.0, 0.0), (0.0, 0.0)), (2, (0.0, 0.02), (0.0, 0.01))}
+    untimed = sum(d[1] == (0.0, 0.0) for d in drawn)
+    assert 15 <= untimed <= 45, untimed  # binomial(60, 0.5): outside this 1 time in 10^4
+    with pytest.raises(ConfigError, match="timing_share"):
+        FR5Env(task="reach", config={"randomisation": {**perturbed, "timing_share": 1.5}})
+
+
 def test_failure_penalty_is_paid_for_the_tasks_other_failures():
     from fr5_rl.tasks.base import TaskOutcome
 

@@ -65,6 +65,7 @@ CASES = [
     ("action size of another version", lambda m: edit_meta(m, lambda d: d.update(action_size=8)), "torch", "meta.json", "retrain"),
     ("unknown task", lambda m: edit_meta(m, lambda d: d.update(task="stack")), "onnx", "meta.json", "unknown task"),
     ("unknown algorithm", lambda m: edit_meta(m, lambda d: d.update(algo="dqn")), "torch", "meta.json", "unknown algorithm"),
+    ("says it observes previous actions its files lack", lambda m: edit_meta(m, lambda d: d["env_overrides"].update(observation={"previous_actions": 2})), "onnx", "meta.json", "retrain"),
     ("trained with another action scaling", lambda m: edit_meta(m, lambda d: d["env_config"]["action"].update(max_joint_step=0.02)), "onnx", "", "retrain"),
 ]
 

@@ -316,3 +316,45 @@ def test_gripper_width_mapping():
         assert s.gripper_width(action(np.zeros(6), s.gripper_action(width))) == pytest.approx(width)
     with pytest.raises(ValueError):
         s.gripper_width(action(np.zeros(6), np.nan))
+
+
+# ----------------------------------------------------------------------------- previous actions
+def history_builder(count: int, include_lift: bool = True) -> ObservationBuilder:
+    return ObservationBuilder(SPEC, {**CFG["observation"], "previous_actions": count}, include_lift=include_lift)
+
+
+def test_previous_actions_come_last_newest_first_and_clipped():
+    from fr5_rl.observation import ActionHistory, observation_size
+
+    builder = history_builder(2)
+    assert builder.size == GRASP_OBSERVATION_SIZE + 12 == observation_size("grasp", {"previous_actions": 2})
+    history = ActionHistory(2)
+    assert history.values() == [0.0] * 12  # an episode starts at rest
+    history.push([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, -1.0])  # the gripper value is not kept
+    history.push([2.0, -3.0, 0.0, 0.0, 0.0, -0.5, 1.0])  # out of range: clipped, as the env clips
+    plain = history_builder(0).build(inputs(object_lift=0.01))
+    observation = builder.build(inputs(object_lift=0.01, previous_actions=history.values()))
+    np.testing.assert_allclose(observation[:GRASP_OBSERVATION_SIZE], plain)
+    np.testing.assert_allclose(observation[GRASP_OBSERVATION_SIZE:],
+                               [1.0, -1.0, 0, 0, 0, -0.5, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6], atol=1e-7)
+    history.push([0.0] * 7)
+    history.push([0.0] * 7)
+    assert history.values() == [0.0] * 12  # only the last two are kept
+    history.push([0.3] * 7)
+    history.reset()
+    assert history.values() == [0.0] * 12
+
+
+@pytest.mark.parametrize("bad", [[0.0] * 11, [0.0] * 13, [0.0] * 11 + [float("nan")], [0.0] * 11 + ["x"]],
+                         ids=["short", "long", "nan", "text"])
+def test_previous_actions_of_the_wrong_length_or_not_finite_are_refused(bad):
+    with pytest.raises(ValueError, match="previous-action|NaN|numbers"):
+        history_builder(2).build(inputs(previous_actions=bad))
+
+
+def test_a_builder_without_previous_actions_refuses_some():
+    """A model trained without the block never gets one (or the other way round) silently."""
+    with pytest.raises(ValueError, match="0 previous-action values"):
+        history_builder(0).build(inputs(previous_actions=[0.0] * 6))
+    with pytest.raises(ValueError, match="6 previous-action values"):
+        history_builder(1).build(inputs())

@@ -511,6 +511,40 @@ def test_init_from_applies_this_runs_settings_and_warms_the_critic_up(ppo_run, t
     assert max(float((released[k] - before[k]).abs().max()) for k in actor) > 0.0
 
 
+def test_init_from_with_more_previous_actions_starts_from_the_same_policy(ppo_run, tmp_path):
+    """A model trained without previous actions in its observation can start a run that has them:
+    the widened network acts exactly as the source on every observation, whatever the new values
+    hold (their weights start at zero), and the run trains from there."""
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    import fr5_rl  # noqa: F401
+    from fr5_rl.runtime.policy import load_policy
+    from fr5_rl.training.train import load_widened
+
+    source = ppo_run / "checkpoints" / "latest"
+    venv = DummyVecEnv([lambda: gym.make("FR5Reach-v0", config={"observation": {"previous_actions": 2}})])
+    model, widened = load_widened(source, PPO, venv, 12, seed=0)
+    before = load_policy(source, "torch")
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        observation = rng.uniform(-1, 1, 23).astype(np.float32)
+        previous = rng.uniform(-1, 1, 12).astype(np.float32)
+        action, _ = model.predict(widened.normalize_obs(np.concatenate([observation, previous])), deterministic=True)
+        np.testing.assert_allclose(np.clip(action, -1, 1), before.act(observation), atol=1e-5)
+    venv.close()
+
+    hyper = write(tmp_path / "wide.yaml", FAST_PPO.replace("env: {}", "env: {observation: {previous_actions: 2}}"))
+    run_dir = tmp_path / "wide"
+    code = train.main(["--init-from", str(source), "--hyperparams", str(hyper), "--timesteps", "256", "--n-envs", "1",
+                       "--no-subprocess", "--eval-freq", "100000", "--no-progress", "--run-dir", str(run_dir)])
+    assert code == 0
+    meta = read_json(run_dir / "final" / "meta.json")
+    assert meta["observation_size"] == 35 and meta["initialised_from"]["model"] == str(source)
+    assert load_policy(run_dir / "final", "torch").act(np.zeros(35)).shape == (7,)
+
+
 def test_critic_warmup_settings_are_checked(tmp_path):
     with pytest.raises(ConfigError, match="critic_warmup.steps"):
         load_hyperparameters("ppo", "reach", str(write(tmp_path / "a.yaml", FAST_PPO + "critic_warmup: {steps: 0, learning_rate: 0.001}\n")))

@@ -92,7 +92,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     task = policy.task
     seeds = list(range(args.seed, args.seed + args.episodes))
     started = time.time()
-    gym = run_episodes(task, {}, lambda env: (policy.act, None), seeds)
+    gym = run_episodes(task, policy.deployment_overrides(), lambda env: (policy.act, None), seeds)
     gym_wall = time.time() - started
 
     with tempfile.TemporaryDirectory() as scratch:

@@ -99,7 +99,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     from fr5_rl.training.evaluation import run_episodes
 
     policy = load_policy(model_dir, args.backend)
-    records = run_episodes(task, {}, lambda env: (policy.act, None), list(range(args.seed, args.seed + args.episodes)))
+    records = run_episodes(task, policy.deployment_overrides(), lambda env: (policy.act, None), list(range(args.seed, args.seed + args.episodes)))
     gym_rate = sum(r["success"] for r in records) / len(records)
     ros_rate = successes / episodes if episodes else 0.0
 

@@ -202,6 +202,9 @@ def validate_env_config(cfg: Mapping[str, Any], robot: RobotSpec) -> None:
     share = float(randomisation.get("plain_episode_share", 0.0))
     if not 0.0 <= share < 1.0:
         raise ConfigError(f"randomisation.plain_episode_share: {share} must be in [0, 1)")
+    timing_share = float(randomisation.get("timing_share", 1.0))
+    if not 0.0 <= timing_share <= 1.0:
+        raise ConfigError(f"randomisation.timing_share: {timing_share} must be in [0, 1]")
     max_step = float(cfg["action"]["max_joint_step"])
     allowed = float(np.min(robot.velocity_limits)) * control_dt
     if not 0.0 < max_step <= allowed + 1e-12:
@@ -212,6 +215,9 @@ def validate_env_config(cfg: Mapping[str, Any], robot: RobotSpec) -> None:
     alpha = float(cfg["action"]["smoothing_alpha"])
     if not 0.0 < alpha <= 1.0:
         raise ConfigError("action.smoothing_alpha must be in (0, 1]")
+    previous = cfg["observation"].get("previous_actions", 0)
+    if isinstance(previous, bool) or not isinstance(previous, int) or not 0 <= previous <= 4:
+        raise ConfigError(f"observation.previous_actions must be a whole number from 0 to 4, got {previous!r}")
     if cfg["reward"]["mode"] not in ("dense", "sparse"):
         raise ConfigError("reward.mode must be 'dense' or 'sparse'")
     low, high = np.asarray(cfg["object"]["region_low"]), np.asarray(cfg["object"]["region_high"])

@@ -24,7 +24,7 @@ from gymnasium import spaces
 from .config import load_env_config, load_robot_spec, object_rest_z, simulation_settings
 from .control import ACTION_SIZE, JointCommandShaper, finite_values
 from .kinematics import ForwardKinematics
-from .observation import ObservationBuilder
+from .observation import ActionHistory, ObservationBuilder
 from .sim.robot import FR5Robot
 from .sim.world import PyBulletWorld
 from .tasks import GraspTask, ReachTask, Task, TaskOutcome, TaskState
@@ -154,6 +154,7 @@ class FR5Env(gym.Env):
         self.shaper = JointCommandShaper(self.robot_spec, self.cfg["action"], self.control_dt)
         self.observation_builder = ObservationBuilder(self.robot_spec, self.cfg["observation"], self.task.include_lift)
         self.observation_space = spaces.Box(-1.0, 1.0, (self.observation_builder.size,), dtype=np.float32)
+        self._action_history = ActionHistory(self.observation_builder.previous_actions)
         self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
 
         sim_cfg = simulation_settings(self.cfg, task)
@@ -168,6 +169,10 @@ class FR5Env(gym.Env):
         self._joint_state_names = tuple(self.robot_spec.joint_names) + tuple(self.robot_spec.finger_joint_names)
         self._object_start: Tuple[float, float, float] = (0.0, 0.0, self._object_rest_z)
         self._gripper_command_width = self.robot_spec.max_opening_width
+        # The width the agent last sent: what the observation shows. Behind action latency the
+        # gripper is still carrying out an older one (_gripper_command_width); the ROS node, too,
+        # knows only what it sent.
+        self._sent_gripper_width = self._gripper_command_width
         self._action_queue: deque = deque()
         self._latency_steps = 0
         self._obs_noise_std = 0.0
@@ -196,9 +201,10 @@ class FR5Env(gym.Env):
         noise = float(self.cfg[self.task.name]["start_joint_noise"])
         start = self.robot_spec.home_joint_positions + rng.uniform(-noise, noise, 6)
         start = np.clip(start, self.robot_spec.lower_limits, self.robot_spec.upper_limits)
-        self._gripper_command_width = self.robot_spec.max_opening_width
+        self._gripper_command_width = self._sent_gripper_width = self.robot_spec.max_opening_width
         self.robot.reset(start, self._gripper_command_width)
         self.shaper.reset()
+        self._action_history.reset()
         self.task.reset()
         self._action_queue.clear()
         self._standing_command = (tuple(start), self._gripper_command_width)
@@ -212,6 +218,8 @@ class FR5Env(gym.Env):
         # thousands of times a second.
         values = finite_values(action, ACTION_SIZE, "the action")
         values = [1.0 if value > 1.0 else (-1.0 if value < -1.0 else value) for value in values]
+        self._action_history.push(values)  # what the agent sent, before any delay
+        self._sent_gripper_width = self.shaper.gripper_width(values)
         applied = self._delayed(values)
         # Targets are offsets from the joint state the last observation saw (as on the robot,
         # where that is the newest /joint_states message, however old). Both lists hold finite
@@ -456,8 +464,8 @@ class FR5Env(gym.Env):
             tcp_position, tcp_rotation = self.kinematics.tcp_pose(q)
             tcp_axis = tcp_rotation[:, 2]
         obs = self.observation_builder.build_from(
-            q, velocities, width, self._gripper_command_width, tcp_position, tcp_axis,
-            object_position, object_position[2] - self._object_rest_z,
+            q, velocities, width, self._sent_gripper_width, tcp_position, tcp_axis,
+            object_position, object_position[2] - self._object_rest_z, self._action_history.values(),
         )
         return state, obs
 
@@ -493,6 +501,13 @@ class FR5Env(gym.Env):
         lo, hi = (int(v) for v in rnd["action_latency_steps"])
         self._latency_steps = int(rng.integers(lo, hi + 1)) if on else 0
         self._obs_noise_std = float(rnd["observation_noise_std"]) if on else 0.0
-        self._command_delay_range = tuple(float(v) for v in rnd["command_delay_s"]) if on else (0.0, 0.0)
-        self._observation_age_range = tuple(float(v) for v in rnd["observation_age_s"]) if on else (0.0, 0.0)
+        # Without timing_share, every perturbed episode has the in-period timing and every plain
+        # one none: a policy then reads "no jitter" as "no latency" and rushes into whole-step
+        # latency alone. Drawn only when asked for, so other configurations keep their episodes.
+        timing = on
+        timing_share = float(rnd.get("timing_share", 1.0))
+        if on and timing_share < 1.0:
+            timing = bool(rng.uniform() < timing_share)
+        self._command_delay_range = tuple(float(v) for v in rnd["command_delay_s"]) if timing else (0.0, 0.0)
+        self._observation_age_range = tuple(float(v) for v in rnd["observation_age_s"]) if timing else (0.0, 0.0)
         self._period_timing = self._command_delay_range[1] > 0.0 or self._observation_age_range[1] > 0.0

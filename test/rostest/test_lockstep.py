@@ -27,7 +27,7 @@ class TestLockstep(unittest.TestCase):
         rospy.Subscriber("/fr5_sim/episode_outcome", String, lambda m: outcomes.append(json.loads(m.data)),
                          queue_size=50)
         policy = load_policy(package_root() / model, "torch")
-        gym = run_episodes(policy.task, {}, lambda env: (policy.act, None), list(range(seed, seed + episodes)))
+        gym = run_episodes(policy.task, policy.deployment_overrides(), lambda env: (policy.act, None), list(range(seed, seed + episodes)))
         deadline = time.monotonic() + 240.0
         while len(outcomes) < episodes and time.monotonic() < deadline and not rospy.is_shutdown():
             time.sleep(0.1)

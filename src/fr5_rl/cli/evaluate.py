@@ -83,9 +83,9 @@ def evaluate(args: argparse.Namespace) -> int:
 
         policy = load_policy(args.model_dir, args.backend)
         task, label, meta = policy.task, str(args.model_dir), policy.meta
-        # The task as registered, not the training variant (which may randomise); use
-        # --training-env for that.
-        overrides = dict(meta.get("env_overrides", {})) if args.training_env else {}
+        # The task as registered, not the training variant (which may randomise; use
+        # --training-env for that), with the observation and action the policy was trained on.
+        overrides = dict(meta.get("env_overrides", {})) if args.training_env else policy.deployment_overrides()
 
         def make_actor(env):
             return policy.act, None

@@ -21,7 +21,7 @@ import numpy as np
 from ..config import RobotSpec, object_rest_z
 from ..control import JointCommandShaper
 from ..kinematics import ForwardKinematics
-from ..observation import ObservationBuilder, ObservationInputs
+from ..observation import ActionHistory, ObservationBuilder, ObservationInputs
 from .bundle import ModelFilesError
 from .joint_state import ArmJointState, Reading
 from .policy import Policy
@@ -236,6 +236,8 @@ class DeploymentStep:
             raise ModelFilesError(f"the policy takes {policy.observation_size} observation values; this fr5_rl "
                                   f"builds {self.builder.size} for {policy.task}: retrain it")
         self.shaper = JointCommandShaper(robot, env_cfg["action"], self.control_dt)
+        # The actions sent, for a policy that observes its previous ones (as in training).
+        self.action_history = ActionHistory(self.builder.previous_actions)
         self.gate = SafetyGate(robot, self.control_dt, SafetyZone(robot, env_cfg))
         self.object_rest_z = object_rest_z(env_cfg)
         self.joint_state_timeout = float(joint_state_timeout)
@@ -258,6 +260,7 @@ class DeploymentStep:
         commanded open, no memory of the previous target. For a new task on the same arm (an
         operator placed a new object and homed the arm, or a simulator reset)."""
         self.shaper.reset()
+        self.action_history.reset()
         self.gripper_command_width = self.max_opening_width
         self._last_target = None
 
@@ -303,6 +306,15 @@ class DeploymentStep:
                         f"target at {np.round(target_in_base, 3).tolist()} m (base) lies outside "
                         f"{np.round(self.target_low, 3).tolist()}..{np.round(self.target_high, 3).tolist()} m")
 
+        # Resuming after a hold, or a new object: start like an episode starts, without the
+        # action filter's old momentum and with no previous actions in the observation (the arm
+        # stood still through the hold).
+        new_object = (self._last_target is not None
+                      and math.dist(target_in_base, self._last_target) > self.new_target_jump)
+        if self.last_hold is not None or new_object:
+            self.shaper.reset()
+            self.action_history.reset()
+
         state = joints.value
         tcp_position, tcp_rotation = self.kinematics.tcp_pose(state.positions)
         width = state.gripper_width if state.gripper_width is not None else self.gripper_command_width
@@ -311,16 +323,10 @@ class DeploymentStep:
                 joint_positions=state.positions, joint_velocities=state.velocities, gripper_width=width,
                 gripper_command_width=self.gripper_command_width, tcp_position=tcp_position,
                 tcp_approach_axis=tcp_rotation[:, 2], object_position=target_in_base,
-                object_lift=float(target_in_base[2] - self.object_rest_z)))
+                object_lift=float(target_in_base[2] - self.object_rest_z),
+                previous_actions=self.action_history.values()))
         except ValueError as error:
             return Hold(HoldReason.OBSERVATION_INVALID, str(error))
-
-        # Resuming after a hold, or a new object: start like an episode starts, without the
-        # action filter's old momentum.
-        new_object = (self._last_target is not None
-                      and math.dist(target_in_base, self._last_target) > self.new_target_jump)
-        if self.last_hold is not None or new_object:
-            self.shaper.reset()
         self._last_target = target_in_base
         started = time.perf_counter()
         action = self.policy.act(observation)
@@ -330,5 +336,6 @@ class DeploymentStep:
         if problem is not None:
             return Hold(HoldReason.UNSAFE_COMMAND, problem)
         self.gripper_command_width = self.shaper.gripper_width(action)
+        self.action_history.push(action)
         return Command(tuple(targets.tolist()), self.gripper_command_width,
                        tuple(target_in_base.tolist()), inference)

@@ -23,11 +23,11 @@ import numpy as np
 
 from ..config import load_env_config, load_yaml
 from ..control import ACTION_SIZE
-from ..observation import GRASP_OBSERVATION_SIZE, REACH_OBSERVATION_SIZE
+from ..observation import GRASP_OBSERVATION_SIZE, REACH_OBSERVATION_SIZE, observation_size
 from .bundle import (META_FILE, MODEL_FILE, ONNX_FILE, STATS_FILE, ModelFilesError, algorithm_class,
                      check_files_present, check_sb3_zip, damaged, read_meta)
 
-OBSERVATION_SIZES = {"reach": REACH_OBSERVATION_SIZE, "grasp": GRASP_OBSERVATION_SIZE}
+OBSERVATION_SIZES = {"reach": REACH_OBSERVATION_SIZE, "grasp": GRASP_OBSERVATION_SIZE}  # without previous actions
 # Settings a trained policy depends on: change one and the observation or the action means
 # something else than during training.
 DEPLOYMENT_SETTINGS = (("simulation", "control_dt"), ("action",), ("observation",))
@@ -43,6 +43,25 @@ class Policy:
         self.observation_size = int(meta["observation_size"])
         self.action_size = int(meta["action_size"])
         self.task = str(meta["task"])
+
+    def deployment_overrides(self) -> Dict[str, Any]:
+        """The part of the model's training overrides (``meta.json`` ``env_overrides``) that its
+        observation and action depend on (:data:`DEPLOYMENT_SETTINGS`, e.g.
+        ``observation.previous_actions``), without its randomisation or reward: what an
+        evaluation of the registered task keeps, so that the environment builds what the policy
+        takes."""
+        overrides = self.meta.get("env_overrides") or {}
+        kept: Dict[str, Any] = {}
+        for path in DEPLOYMENT_SETTINGS:
+            value: Any = overrides
+            for key in path:
+                value = value.get(key) if isinstance(value, dict) else None
+            if value is not None:
+                node = kept
+                for key in path[:-1]:
+                    node = node.setdefault(key, {})
+                node[path[-1]] = value
+        return kept
 
     def act(self, observation: np.ndarray) -> np.ndarray:
         """The deterministic action for one raw observation.
@@ -162,6 +181,9 @@ def config_mismatches(meta: Mapping[str, Any]) -> List[str]:
             for key in path:
                 saved = saved.get(key) if isinstance(saved, dict) else None
                 current = current.get(key) if isinstance(current, dict) else None
+            if path == ("observation",) and isinstance(saved, dict):
+                # Models from before observation.previous_actions existed carry none.
+                saved = {"previous_actions": 0, **saved}
             if saved != current:
                 differences.append(f"env {'.'.join(path)}: trained with {saved}, now {current}")
     saved_robot = meta.get("robot_config")
@@ -181,10 +203,11 @@ def check_meta_matches_code(model_dir: Path, meta: Mapping[str, Any], expected_t
         raise ModelFilesError(f"{path}: unknown task '{task}' (this fr5_rl knows {', '.join(OBSERVATION_SIZES)})")
     if expected_task is not None and task != expected_task:
         raise ModelFilesError(f"{model_dir} was trained on '{task}', not '{expected_task}': pass a {expected_task} model")
-    if meta["observation_size"] != OBSERVATION_SIZES[task]:
+    expected_size = observation_size(task, load_env_config(meta.get("env_overrides", {}))["observation"])
+    if meta["observation_size"] != expected_size:
         raise ModelFilesError(
             f"{path}: the model takes {meta['observation_size']} observation values but this fr5_rl builds "
-            f"{OBSERVATION_SIZES[task]} for {task}: it belongs to another version of fr5_rl; retrain it")
+            f"{expected_size} for {task} with its settings: it belongs to another version of fr5_rl; retrain it")
     if meta["action_size"] != ACTION_SIZE:
         raise ModelFilesError(
             f"{path}: the model gives {meta['action_size']} action values but this fr5_rl takes {ACTION_SIZE}: "

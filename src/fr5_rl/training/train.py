@@ -156,15 +156,83 @@ def initialise_from(model_dir: Path, task: str, algo: str, venv, meta: Dict[str,
     :raises ModelFilesError: its files are missing or damaged.
     """
     source = read_meta(model_dir)
+    added = added_previous_actions(source, meta)
     for key in ("task", "algo", "observation_size", "action_size"):
-        if source.get(key) != meta.get(key):
+        if source.get(key) != meta.get(key) and not (key == "observation_size" and added):
             raise ConfigError(f"--init-from {model_dir}: its {key} is {source.get(key)!r}, this run's is "
                               f"{meta.get(key)!r}; start from a model of the same task and algorithm")
     check_files_present(model_dir, "torch")
     settings = {key: value for key, value in algo_kwargs.items() if key not in ("policy", "policy_kwargs")}
-    model, venv = load_trained(model_dir, algorithm_class(algo), venv, tensorboard_log=str(run_dir / "tb"),
-                               **settings)
+    if added:
+        model, venv = load_widened(model_dir, algorithm_class(algo), venv, added, int(meta["seed"]),
+                                   tensorboard_log=str(run_dir / "tb"), **settings)
+    else:
+        model, venv = load_trained(model_dir, algorithm_class(algo), venv, tensorboard_log=str(run_dir / "tb"),
+                                   **settings)
     venv.training = True  # the statistics keep adapting to the new randomisation
+    return model, venv
+
+
+def added_previous_actions(source: Dict[str, Any], meta: Dict[str, Any]) -> int:
+    """Observation values this run adds to the ``--init-from`` model's by carrying more previous
+    actions (``observation.previous_actions``), with the rest of the layout the same; else 0."""
+    from ..observation import ARM_ACTION_SIZE, previous_action_count
+
+    had = previous_action_count((source.get("env_config") or {}).get("observation") or {})
+    has = previous_action_count(meta["env_config"]["observation"])
+    added = ARM_ACTION_SIZE * (has - had)
+    same_otherwise = source.get("observation_size") == meta.get("observation_size") - added
+    return added if added > 0 and same_otherwise and source.get("task") == meta.get("task") else 0
+
+
+def load_widened(model_dir: Path, algo_cls, venv, added: int, seed: int, **model_kwargs: Any):
+    """The model in ``model_dir``, its inputs widened by ``added`` observation values (more
+    previous actions), acting exactly as it did: every weight it had is copied, and the weights
+    of the new inputs start at zero. Its VecNormalize statistics are widened with mean 0 and
+    variance 1 for the new values, which then adapt like the others.
+
+    :param model_kwargs: this run's algorithm settings (the network is the saved one).
+    :raises ModelFilesError: a damaged ``model.zip`` or ``vecnormalize.pkl``.
+    """
+    import numpy as np
+    import torch
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from ..runtime.policy import load_normalizer
+
+    stats = load_normalizer(model_dir)
+    check_sb3_zip(model_dir / MODEL_FILE)
+    try:
+        source = algo_cls.load(model_dir / MODEL_FILE, device="cpu")
+    except Exception as error:
+        venv.close()
+        raise damaged(model_dir / MODEL_FILE, error, f"a Stable-Baselines3 {algo_cls.__name__} model") from None
+    old_size = int(source.observation_space.shape[0])
+    venv = VecNormalize(venv, norm_obs=stats.norm_obs, norm_reward=stats.norm_reward, clip_obs=stats.clip_obs,
+                        clip_reward=stats.clip_reward, gamma=stats.gamma, epsilon=stats.epsilon)
+    venv.obs_rms.mean = np.concatenate([stats.obs_rms.mean, np.zeros(added)])
+    venv.obs_rms.var = np.concatenate([stats.obs_rms.var, np.ones(added)])
+    venv.obs_rms.count = stats.obs_rms.count
+    venv.ret_rms = stats.ret_rms
+    model = algo_cls(source.policy_class, venv, policy_kwargs=source.policy_kwargs, seed=seed, device="cpu",
+                     verbose=0, **model_kwargs)
+    widened = model.policy.state_dict()
+    with torch.no_grad():
+        for name, weight in source.policy.state_dict().items():
+            target = widened[name]
+            if weight.shape == target.shape:
+                target.copy_(weight)
+            elif weight.dim() == 2 and target.shape == (weight.shape[0], weight.shape[1] + added):
+                # A layer reading the observation (a critic reads it followed by the action): the
+                # new values sit right after the old observation, with zero weights.
+                target.zero_()
+                target[:, :old_size] = weight[:, :old_size]
+                target[:, old_size + added:] = weight[:, old_size:]
+            else:
+                raise ConfigError(f"--init-from {model_dir}: cannot widen {name} from {tuple(weight.shape)} "
+                                  f"to {tuple(target.shape)}")
+    model.policy.load_state_dict(widened)
+    model.num_timesteps = source.num_timesteps
     return model, venv
 
 
