@@ -218,14 +218,16 @@ class FR5Env(gym.Env):
         # thousands of times a second.
         values = finite_values(action, ACTION_SIZE, "the action")
         values = [1.0 if value > 1.0 else (-1.0 if value < -1.0 else value) for value in values]
-        self._action_history.push(values)  # what the agent sent, before any delay
-        self._sent_gripper_width = self.shaper.gripper_width(values)
+        if self._action_history.count:
+            self._action_history.push(values)  # what the agent sent, before any delay
+        self._sent_gripper_width = sent_width = self.shaper.gripper_width(values)
         applied = self._delayed(values)
         # Targets are offsets from the joint state the last observation saw (as on the robot,
         # where that is the newest /joint_states message, however old). Both lists hold finite
         # floats (the observation refuses anything else), so the shaper's checks are not repeated.
         targets = self.shaper.targets_from_floats(applied, self._observed_joint_positions)
-        measured_early = self._run_period(targets, self.shaper.gripper_width(applied))
+        width = sent_width if applied is values else self.shaper.gripper_width(applied)
+        measured_early = self._run_period(targets, width)
 
         state, obs = self._observe(measured_early)
         success, failure, terminated, truncated, _, outcome = self.judge_period(state)

@@ -81,9 +81,8 @@ class ActionHistory:
 
     def push(self, action: Sequence[float]) -> None:
         """Record the action just sent (its first six values, clipped to [-1, 1])."""
-        if self.count:
-            self._actions.appendleft([1.0 if v > 1.0 else (-1.0 if v < -1.0 else float(v))
-                                      for v in action[:ARM_ACTION_SIZE]])
+        self._actions.appendleft([1.0 if v > 1.0 else (-1.0 if v < -1.0 else float(v))
+                                  for v in action[:ARM_ACTION_SIZE]])
 
     def values(self) -> List[float]:
         """The block as one flat list, newest action first (``6 * count`` values)."""
@@ -174,14 +173,16 @@ class ObservationBuilder:
                    *tcp_approach_axis, object_x - tcp_x, object_y - tcp_y, object_z - tcp_z]
             if self.include_lift:
                 raw.append(object_lift)
-            history = [float(value) for value in previous_actions]
-            finite = math.isfinite(sum(raw) + sum(history))  # a single NaN or inf makes the sum non-finite
+            history = [float(value) for value in previous_actions] if self.previous_actions else None
+            total = sum(raw) + sum(history) if history else sum(raw)
+            finite = math.isfinite(total)  # a single NaN or inf makes the sum non-finite
             values = []
             if finite:
                 for value, gain, bias in zip(raw, self._gain, self._bias):
                     value = value * gain - bias
                     values.append(1.0 if value > 1.0 else (-1.0 if value < -1.0 else value))
-                values.extend(1.0 if value > 1.0 else (-1.0 if value < -1.0 else value) for value in history)
+                if history:
+                    values.extend(1.0 if value > 1.0 else (-1.0 if value < -1.0 else value) for value in history)
         except (TypeError, ValueError) as error:  # strings, None, arrays where numbers belong
             raise ValueError(f"observation inputs must be numbers and sequences of numbers: {error}") from None
         if not finite:

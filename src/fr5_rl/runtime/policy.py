@@ -23,11 +23,11 @@ import numpy as np
 
 from ..config import load_env_config, load_yaml
 from ..control import ACTION_SIZE
-from ..observation import GRASP_OBSERVATION_SIZE, REACH_OBSERVATION_SIZE, observation_size
+from ..observation import observation_size, previous_action_count
 from .bundle import (META_FILE, MODEL_FILE, ONNX_FILE, STATS_FILE, ModelFilesError, algorithm_class,
                      check_files_present, check_sb3_zip, damaged, read_meta)
 
-OBSERVATION_SIZES = {"reach": REACH_OBSERVATION_SIZE, "grasp": GRASP_OBSERVATION_SIZE}  # without previous actions
+TASKS = ("reach", "grasp")
 # Settings a trained policy depends on: change one and the observation or the action means
 # something else than during training.
 DEPLOYMENT_SETTINGS = (("simulation", "control_dt"), ("action",), ("observation",))
@@ -170,20 +170,24 @@ class OnnxPolicy(Policy):
         return np.asarray(action[0], dtype=np.float64)
 
 
-def config_mismatches(meta: Mapping[str, Any]) -> List[str]:
-    """Differences between the configuration a model was trained with and the current one."""
+def config_mismatches(meta: Mapping[str, Any], current_env: Optional[Mapping[str, Any]] = None) -> List[str]:
+    """Differences between the configuration a model was trained with and the current one.
+
+    :param current_env: env.yaml merged with the model's overrides, if already loaded.
+    """
     differences = []
     saved_env = meta.get("env_config")
     if saved_env is not None:
-        current_env = load_env_config(meta.get("env_overrides", {}))
+        if current_env is None:
+            current_env = load_env_config(meta.get("env_overrides", {}))
         for path in DEPLOYMENT_SETTINGS:
             saved, current = saved_env, current_env
             for key in path:
                 saved = saved.get(key) if isinstance(saved, dict) else None
                 current = current.get(key) if isinstance(current, dict) else None
             if path == ("observation",) and isinstance(saved, dict):
-                # Models from before observation.previous_actions existed carry none.
-                saved = {"previous_actions": 0, **saved}
+                # A model from before observation.previous_actions existed carries none.
+                saved = {**saved, "previous_actions": previous_action_count(saved)}
             if saved != current:
                 differences.append(f"env {'.'.join(path)}: trained with {saved}, now {current}")
     saved_robot = meta.get("robot_config")
@@ -199,11 +203,12 @@ def check_meta_matches_code(model_dir: Path, meta: Mapping[str, Any], expected_t
     """Refuse a model whose task, sizes or deployment settings do not match this code."""
     path = Path(model_dir) / META_FILE
     task = meta["task"]
-    if task not in OBSERVATION_SIZES:
-        raise ModelFilesError(f"{path}: unknown task '{task}' (this fr5_rl knows {', '.join(OBSERVATION_SIZES)})")
+    if task not in TASKS:
+        raise ModelFilesError(f"{path}: unknown task '{task}' (this fr5_rl knows {', '.join(TASKS)})")
     if expected_task is not None and task != expected_task:
         raise ModelFilesError(f"{model_dir} was trained on '{task}', not '{expected_task}': pass a {expected_task} model")
-    expected_size = observation_size(task, load_env_config(meta.get("env_overrides", {}))["observation"])
+    current_env = load_env_config(meta.get("env_overrides", {}))
+    expected_size = observation_size(task, current_env["observation"])
     if meta["observation_size"] != expected_size:
         raise ModelFilesError(
             f"{path}: the model takes {meta['observation_size']} observation values but this fr5_rl builds "
@@ -212,7 +217,7 @@ def check_meta_matches_code(model_dir: Path, meta: Mapping[str, Any], expected_t
         raise ModelFilesError(
             f"{path}: the model gives {meta['action_size']} action values but this fr5_rl takes {ACTION_SIZE}: "
             "it belongs to another version of fr5_rl; retrain it")
-    differences = config_mismatches(meta)
+    differences = config_mismatches(meta, current_env)
     if differences:
         raise ModelFilesError(f"{model_dir} does not match the current configuration: " + "; ".join(differences)
                               + ". Restore those settings or retrain the model.")

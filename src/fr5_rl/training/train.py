@@ -17,9 +17,9 @@ from typing import Any, Callable, Dict, Optional, Sequence
 
 
 from ..config import ConfigError, ExpertStartSettings, Hyperparameters, load_yaml, typed
-from ..runtime.bundle import (MODEL_FILE, STATS_FILE, algorithm_class, build_meta, check_files_present,
-                              check_sb3_zip, damaged, machine_description, read_meta, recover_model_dir,
-                              save_model_dir, write_json_atomic)
+from ..runtime.bundle import (MODEL_FILE, STATS_FILE, ModelFilesError, algorithm_class, build_meta,
+                              check_files_present, check_sb3_zip, damaged, machine_description, read_meta,
+                              recover_model_dir, save_model_dir, write_json_atomic)
 from .algorithms import check_hyperparameters, hyperparameter_source, load_hyperparameters
 from .callbacks import REPLAY_FILE, save_checkpoint
 
@@ -182,7 +182,7 @@ def added_previous_actions(source: Dict[str, Any], meta: Dict[str, Any]) -> int:
     has = previous_action_count(meta["env_config"]["observation"])
     added = ARM_ACTION_SIZE * (has - had)
     same_otherwise = source.get("observation_size") == meta.get("observation_size") - added
-    return added if added > 0 and same_otherwise and source.get("task") == meta.get("task") else 0
+    return added if added > 0 and same_otherwise else 0
 
 
 def load_widened(model_dir: Path, algo_cls, venv, added: int, seed: int, **model_kwargs: Any):
@@ -200,13 +200,16 @@ def load_widened(model_dir: Path, algo_cls, venv, added: int, seed: int, **model
 
     from ..runtime.policy import load_normalizer
 
-    stats = load_normalizer(model_dir)
-    check_sb3_zip(model_dir / MODEL_FILE)
     try:
-        source = algo_cls.load(model_dir / MODEL_FILE, device="cpu")
-    except Exception as error:
+        stats = load_normalizer(model_dir)
+        check_sb3_zip(model_dir / MODEL_FILE)
+        try:
+            source = algo_cls.load(model_dir / MODEL_FILE, device="cpu")
+        except Exception as error:
+            raise damaged(model_dir / MODEL_FILE, error, f"a Stable-Baselines3 {algo_cls.__name__} model") from None
+    except ModelFilesError:
         venv.close()
-        raise damaged(model_dir / MODEL_FILE, error, f"a Stable-Baselines3 {algo_cls.__name__} model") from None
+        raise
     old_size = int(source.observation_space.shape[0])
     venv = VecNormalize(venv, norm_obs=stats.norm_obs, norm_reward=stats.norm_reward, clip_obs=stats.clip_obs,
                         clip_reward=stats.clip_reward, gamma=stats.gamma, epsilon=stats.epsilon)
@@ -216,7 +219,7 @@ def load_widened(model_dir: Path, algo_cls, venv, added: int, seed: int, **model
     venv.ret_rms = stats.ret_rms
     model = algo_cls(source.policy_class, venv, policy_kwargs=source.policy_kwargs, seed=seed, device="cpu",
                      verbose=0, **model_kwargs)
-    widened = model.policy.state_dict()
+    widened = model.policy.state_dict()  # views of the new model's parameters: filled in place
     with torch.no_grad():
         for name, weight in source.policy.state_dict().items():
             target = widened[name]
@@ -231,7 +234,6 @@ def load_widened(model_dir: Path, algo_cls, venv, added: int, seed: int, **model
             else:
                 raise ConfigError(f"--init-from {model_dir}: cannot widen {name} from {tuple(weight.shape)} "
                                   f"to {tuple(target.shape)}")
-    model.policy.load_state_dict(widened)
     model.num_timesteps = source.num_timesteps
     return model, venv
 
