@@ -38,18 +38,21 @@ def test_shipped_model_still_solves_its_task(name):
     assert rate >= minimum, f"{name}: {rate:.0%} over {episodes} episodes, gate {minimum:.0%}"
 
 
-def test_grasp_robust_holds_behind_a_step_of_latency_with_every_perturbation():
-    """What models/grasp_robust is for: one control step of action latency, 5 mm observation
-    noise and object mass and friction +-20 % together (99.5 % over 200 held-out episodes)."""
+@pytest.mark.parametrize("latency_steps, minimum", [(1, 0.85), (2, 0.80)])
+def test_grasp_robust_holds_behind_latency_with_every_perturbation(latency_steps, minimum):
+    """What models/grasp_robust is for: one or two control steps of action latency, 5 mm
+    observation noise and object mass and friction +-20 % together (over 200 held-out episodes:
+    97.5 % at one step; 94 % at two steps of latency alone)."""
     policy = load_policy(MODELS / "grasp_robust", "onnx", expected_task="grasp")
     perturbed = dict(policy.deployment_overrides(), randomisation={
-        "enabled": True, "action_latency_steps": [1, 1], "observation_noise_std": 0.005,
+        "enabled": True, "action_latency_steps": [latency_steps, latency_steps], "observation_noise_std": 0.005,
         "object_mass_scale": [0.8, 1.2], "friction_scale": [0.8, 1.2], "object_size_scale": [1, 1],
         "joint_damping": [0, 0], "physics_dt_choices": []})
     seeds = list(range(2_100_000, 2_100_030))
     records = run_episodes("grasp", perturbed, lambda env: (policy.act, None), seeds)
     rate = sum(r["success"] for r in records) / len(seeds)
-    assert rate >= 0.85, f"grasp_robust behind one step of latency: {rate:.0%} over {len(seeds)} episodes"
+    assert rate >= minimum, (f"grasp_robust behind {latency_steps} step(s) of latency: {rate:.0%} over "
+                             f"{len(seeds)} episodes, gate {minimum:.0%}")
 
 
 @pytest.mark.parametrize("name", sorted(GATES))

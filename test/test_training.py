@@ -178,6 +178,42 @@ def test_monitor_logs_episodes(ppo_run):
     assert sum(int(row["l"]) for row in rows) <= 3072
 
 
+def test_gated_evaluation_skips_until_training_episodes_succeed(tmp_path):
+    """A random reach policy never succeeds, so a gate of 50 % skips every evaluation, and the
+    run says how many it skipped; with the gate at 0 the same run evaluates every time."""
+    histories = {}
+    for gate in ("0.5", "0"):
+        run_dir = tmp_path / f"gate_{gate}"
+        code = train.main(["--timesteps", "2048", "--n-envs", "2", "--no-subprocess", "--eval-freq", "512",
+                           "--eval-episodes", "1", "--no-progress", "--run-dir", str(run_dir),
+                           "--hyperparams", str(write(tmp_path / "ppo_fast.yaml", FAST_PPO)),
+                           "--eval-min-training-success", gate])
+        assert code == 0
+        summary = read_json(run_dir / "summary.json")
+        histories[gate] = (summary.get("eval_history", []), summary["evaluations_skipped"])
+    assert histories["0.5"] == ([], 4)
+    assert len(histories["0"][0]) == 4 and histories["0"][1] == 0
+
+
+def test_evaluation_across_processes(tmp_path):
+    """--eval-envs 3 with worker processes: every evaluation runs all its episodes."""
+    run_dir = tmp_path / "run"
+    code = train.main(["--timesteps", "1024", "--n-envs", "2", "--processes", "2", "--eval-envs", "3",
+                       "--eval-freq", "512", "--eval-episodes", "4", "--no-progress", "--run-dir", str(run_dir),
+                       "--hyperparams", str(write(tmp_path / "ppo_fast.yaml", FAST_PPO))])
+    assert code == 0
+    evaluations = np.load(run_dir / "eval" / "evaluations.npz")
+    assert evaluations["results"].shape == (2, 4)  # two evaluations of four episodes each
+    assert read_json(run_dir / "config.json")["eval_envs"] == 3
+
+
+@pytest.mark.parametrize("option", [["--eval-envs", "0"], ["--eval-min-training-success", "1.5"]])
+def test_evaluation_options_are_checked(option, tmp_path, capsys):
+    code = train.main(["--timesteps", "1000", "--no-progress", "--run-dir", str(tmp_path / "run"), *option])
+    assert code == 2
+    assert option[0] in capsys.readouterr().err
+
+
 # ----------------------------------------------------------------------------- kill and resume
 def test_killed_run_resumes(tmp_path, capsys):
     run_dir = tmp_path / "run"
@@ -464,7 +500,7 @@ def test_init_from_continues_the_given_model(ppo_run, tmp_path):
 
     source = ppo_run / "checkpoints" / "latest"
     run_dir = tmp_path / "fine"
-    code = train.main(["--init-from", str(source), "--timesteps", "512", "--n-envs", "1", "--no-subprocess",
+    code = train.main(["--init-from", str(source), "--timesteps", "512", "--n-envs", "2", "--no-subprocess",
                        "--checkpoint-freq", "256", "--eval-freq", "100000", "--no-progress", "--run-dir", str(run_dir)])
     assert code == 0
     meta = read_json(run_dir / "final" / "meta.json")

@@ -6,7 +6,8 @@ All poses are expressed in ``base_link``; positions in metres.
 """
 from __future__ import annotations
 
-from typing import Tuple
+import math
+from typing import Sequence, Tuple
 
 import numpy as np
 
@@ -34,20 +35,36 @@ class ForwardKinematics:
         self._origin_rotations = [rotation_from_rpy(*rpy) for rpy in robot.joint_origins_rpy]
         self._origin_translations = [np.asarray(xyz, dtype=np.float64) for xyz in robot.joint_origins_xyz]
         self._tcp_offset = float(robot.tcp_offset)
+        # The same table as plain floats (rotation row-major, then translation): flange_pose runs
+        # for every observation, where numpy's per-call cost on 3x3 matrices dominates.
+        self._origins_flat = [tuple(float(v) for v in rotation.ravel()) + tuple(float(v) for v in translation)
+                              for rotation, translation in zip(self._origin_rotations, self._origin_translations)]
 
-    def flange_pose(self, joint_positions: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-        """Return (position (3,), rotation (3, 3)) of the flange (``wrist3_Link``) in base_link."""
-        rotation = np.eye(3)
-        position = np.zeros(3)
-        for origin_rotation, origin_translation, angle in zip(
-            self._origin_rotations, self._origin_translations, joint_positions
+    def flange_pose(self, joint_positions: Sequence[float]) -> Tuple[np.ndarray, np.ndarray]:
+        """Return (position (3,), rotation (3, 3)) of the flange (``wrist3_Link``) in base_link.
+
+        Each joint: position += R @ origin translation, then R = R @ origin rotation @ Rz(angle).
+        """
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        px = py = pz = 0.0
+        for (o00, o01, o02, o10, o11, o12, o20, o21, o22, tx, ty, tz), angle in zip(
+            self._origins_flat, joint_positions
         ):
-            position = position + rotation @ origin_translation
-            c, s = np.cos(angle), np.sin(angle)
-            # origin rotation followed by the joint's rotation about its local z axis
-            joint_rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-            rotation = rotation @ origin_rotation @ joint_rotation
-        return position, rotation
+            px += r00 * tx + r01 * ty + r02 * tz
+            py += r10 * tx + r11 * ty + r12 * tz
+            pz += r20 * tx + r21 * ty + r22 * tz
+            c, s = math.cos(angle), math.sin(angle)
+            # M = origin rotation @ Rz(angle): its first two columns turn, the third stays.
+            m00, m01 = o00 * c + o01 * s, o01 * c - o00 * s
+            m10, m11 = o10 * c + o11 * s, o11 * c - o10 * s
+            m20, m21 = o20 * c + o21 * s, o21 * c - o20 * s
+            r00, r01, r02 = (r00 * m00 + r01 * m10 + r02 * m20, r00 * m01 + r01 * m11 + r02 * m21,
+                             r00 * o02 + r01 * o12 + r02 * o22)
+            r10, r11, r12 = (r10 * m00 + r11 * m10 + r12 * m20, r10 * m01 + r11 * m11 + r12 * m21,
+                             r10 * o02 + r11 * o12 + r12 * o22)
+            r20, r21, r22 = (r20 * m00 + r21 * m10 + r22 * m20, r20 * m01 + r21 * m11 + r22 * m21,
+                             r20 * o02 + r21 * o12 + r22 * o22)
+        return np.array((px, py, pz)), np.array(((r00, r01, r02), (r10, r11, r12), (r20, r21, r22)))
 
     def joint_origins(self, joint_positions: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """Origins of the joint frames j1 … j6 (rows, m, base_link; j6's is the flange) and the
