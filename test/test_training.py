@@ -195,19 +195,7 @@ def test_gated_evaluation_skips_until_training_episodes_succeed(tmp_path):
     assert len(histories["0"][0]) == 4 and histories["0"][1] == 0
 
 
-def test_evaluation_across_processes(tmp_path):
-    """--eval-envs 3 with worker processes: every evaluation runs all its episodes."""
-    run_dir = tmp_path / "run"
-    code = train.main(["--timesteps", "1024", "--n-envs", "2", "--processes", "2", "--eval-envs", "3",
-                       "--eval-freq", "512", "--eval-episodes", "4", "--no-progress", "--run-dir", str(run_dir),
-                       "--hyperparams", str(write(tmp_path / "ppo_fast.yaml", FAST_PPO))])
-    assert code == 0
-    evaluations = np.load(run_dir / "eval" / "evaluations.npz")
-    assert evaluations["results"].shape == (2, 4)  # two evaluations of four episodes each
-    assert read_json(run_dir / "config.json")["eval_envs"] == 3
-
-
-@pytest.mark.parametrize("option", [["--eval-envs", "0"], ["--eval-min-training-success", "1.5"]])
+@pytest.mark.parametrize("option", [["--eval-min-training-success", "1.5"], ["--eval-min-training-success", "-0.1"]])
 def test_evaluation_options_are_checked(option, tmp_path, capsys):
     code = train.main(["--timesteps", "1000", "--no-progress", "--run-dir", str(tmp_path / "run"), *option])
     assert code == 2
@@ -327,6 +315,33 @@ def test_shipped_hyperparameters_pass_their_checks():
         hyper = load_hyperparameters(algo, task, str(path))
         check_hyperparameters(algo, hyper, hyper.n_envs)
         assert hyper.n_timesteps > 0
+
+
+def test_a_hyperparameter_file_builds_on_its_base(tmp_path):
+    """``base:`` merges the named file under this one: nested keys are replaced one by one,
+    keys the base lacks are added, and the stage-3 grasp file is the robust file plus its lag."""
+    robust = load_hyperparameters("ppo", "grasp", "ppo_grasp_robust").to_dict()
+    stage3 = load_hyperparameters("ppo", "grasp", "ppo_grasp_robust_stage3").to_dict()
+    assert stage3["env"]["randomisation"]["action_latency_steps"] == [1, 2]
+    assert stage3["n_timesteps"] == 2_000_000
+    robust["env"]["randomisation"]["action_latency_steps"], robust["n_timesteps"] = [1, 2], 2_000_000
+    assert stage3 == robust
+    child = write(tmp_path / "child.yaml", f"base: {tmp_path / 'parent.yaml'}\nn_envs: 4\n"
+                  "algo_kwargs: {n_steps: 128}\ncritic_warmup: {steps: 100, learning_rate: 0.001}\n")
+    write(tmp_path / "parent.yaml", FAST_PPO)
+    merged = load_hyperparameters("ppo", "reach", child)
+    assert merged.n_envs == 4 and merged.algo_kwargs["n_steps"] == 128 and merged.algo_kwargs["n_epochs"] == 2
+    assert merged.critic_warmup is not None and merged.critic_warmup.steps == 100
+
+
+def test_hyperparameter_bases_that_loop_or_are_missing_are_refused(tmp_path):
+    first = write(tmp_path / "first.yaml", f"base: {tmp_path / 'second.yaml'}\nn_envs: 2\n")
+    write(tmp_path / "second.yaml", f"base: {first}\nn_envs: 3\n")
+    with pytest.raises(ConfigError, match="leads back to itself"):
+        load_hyperparameters("ppo", "reach", first)
+    lonely = write(tmp_path / "lonely.yaml", "base: no_such_file\nn_envs: 2\n")
+    with pytest.raises(ConfigError, match="not found"):
+        load_hyperparameters("ppo", "reach", lonely)
 
 
 def test_off_policy_batch_larger_than_buffer_refused(tmp_path):

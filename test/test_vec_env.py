@@ -7,7 +7,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from fr5_rl.training.train import make_env_factory, make_vec_env
-from fr5_rl.training.vec_env import ChunkedSubprocVecEnv, FreshInfoDummyVecEnv, split_evenly
+from fr5_rl.training.vec_env import ChunkedSubprocVecEnv, split_evenly
 
 # Randomisation on, so that every environment's own seeded draws matter.
 ENV = {"randomisation": {"enabled": True, "action_latency_steps": [0, 1], "observation_noise_std": 0.002,
@@ -62,26 +62,6 @@ def test_chunked_steps_exactly_as_a_dummy_vec_env_through_automatic_resets():
     finally:
         chunked.close()
         reference.close()
-
-
-def test_fresh_info_vec_env_returns_infos_a_later_step_leaves_alone():
-    """Without SB3's deep copy, one step's infos must still survive the next steps (a new list
-    of the environments' new dicts), through automatic resets."""
-    venv = FreshInfoDummyVecEnv(factories(2))
-    try:
-        venv.reset()
-        actions = np.random.default_rng(1).uniform(-1, 1, (45, 2, 7)).astype(np.float32)
-        kept = []
-        for action in actions:
-            infos = venv.step(action)[3]
-            kept.append((infos, [dict(info) for info in infos]))
-        for infos, snapshot in kept:
-            assert [set(info) for info in infos] == [set(info) for info in snapshot]
-            for info, copy in zip(infos, snapshot):
-                assert all(info[key] is copy[key] for key in copy)
-        assert sum("terminal_observation" in info for infos, _ in kept for info in infos) >= 4
-    finally:
-        venv.close()
 
 
 def test_attributes_and_methods_reach_the_right_environment_in_any_order():

@@ -67,18 +67,19 @@ def load_yaml(path_or_name: str | Path) -> Dict[str, Any]:
     return data
 
 
-def deep_update(base: Dict[str, Any], overrides: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
+def deep_update(base: Dict[str, Any], overrides: Optional[Mapping[str, Any]], strict: bool = True) -> Dict[str, Any]:
     """Return a copy of ``base`` with ``overrides`` merged in recursively.
 
-    Unknown top-level or nested keys are refused, so a typo in an override is an error rather
-    than a silently ignored setting.
+    :param strict: refuse keys that ``base`` lacks, so a typo in an override is an error rather
+        than a silently ignored setting; False adds them (a file built on another, whose own
+        checks come after the merge).
     """
     merged = copy.deepcopy(base)
     for key, value in (overrides or {}).items():
-        if key not in merged:
+        if strict and key not in merged:
             raise ConfigError(f"unknown configuration key '{key}'; known keys: {sorted(merged)}")
-        if isinstance(merged[key], dict) and isinstance(value, Mapping):
-            merged[key] = deep_update(merged[key], value)
+        if isinstance(merged.get(key), dict) and isinstance(value, Mapping):
+            merged[key] = deep_update(merged[key], value, strict)
         else:
             merged[key] = copy.deepcopy(value)
     return merged

@@ -40,8 +40,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--target-success", type=float, default=0.95,
                         help="evaluation success rate that counts as solved, for time to solve (0.95)")
     parser.add_argument("--stop-at-success", action="store_true", help="stop once solved")
-    parser.add_argument("--eval-envs", type=int, default=1, metavar="N",
-                        help="evaluation environments stepped together, on the training's processes (1)")
     parser.add_argument("--eval-min-training-success", type=float, default=0.0, metavar="RATE",
                         help="skip an evaluation while the training episodes since the last one succeeded "
                              "less often than this (0..1; default 0: evaluate every --eval-freq steps)")

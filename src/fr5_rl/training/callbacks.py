@@ -131,10 +131,10 @@ class GatedEvaluation(EvalCallback):
 
     def _on_step(self) -> bool:
         if self.min_training_success > 0.0:
-            for info, done in zip(self.locals["infos"], self.locals["dones"]):
-                if done:
-                    self._episodes += 1
-                    self._successes += bool(info.get("is_success", False))
+            infos = self.locals["infos"]
+            for index in np.flatnonzero(self.locals["dones"]):  # episode ends only: this runs every step
+                self._episodes += 1
+                self._successes += bool(infos[index].get("is_success", False))
             if self.eval_freq > 0 and self.n_calls % self.eval_freq == 0:
                 rate = self._successes / self._episodes if self._episodes else 0.0
                 self._episodes = self._successes = 0

@@ -21,7 +21,7 @@ from ..runtime.bundle import (MODEL_FILE, STATS_FILE, ModelFilesError, algorithm
                               check_files_present, check_sb3_zip, damaged, machine_description, read_meta,
                               recover_model_dir, save_model_dir, write_json_atomic)
 from .algorithms import check_hyperparameters, hyperparameter_source, load_hyperparameters
-from .callbacks import REPLAY_FILE, GatedEvaluation, save_checkpoint
+from .callbacks import REPLAY_FILE, save_checkpoint
 
 EVAL_SEED_OFFSET = 10_000  # evaluation seeds never overlap training seeds
 
@@ -89,22 +89,25 @@ def make_vec_env(task: str, env_overrides: Dict[str, Any], n_envs: int, seed: in
         available core, at most ``n_envs``. One means a plain ``DummyVecEnv``.
     :param expert_start: see :func:`make_env_factory` (None: plain resets).
     """
-    from .vec_env import ChunkedSubprocVecEnv, FreshInfoDummyVecEnv
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from .vec_env import ChunkedSubprocVecEnv
 
     factories = [make_env_factory(task, env_overrides, seed, rank, monitor_dir, expert_start)
                  for rank in range(n_envs)]
     processes = min(processes or available_cores(), n_envs) if subprocess else 1
     if processes <= 1:
-        return FreshInfoDummyVecEnv(factories)
+        return DummyVecEnv(factories)
     return ChunkedSubprocVecEnv(factories, processes, start_method=start_method)
 
 
 def build_callbacks(args: argparse.Namespace, run_dir: Path, eval_env, meta: Dict[str, Any], t_start: float,
                     summary: Dict[str, Any]):
-    """Checkpointing, evaluation (best model with stats), reward-term logging, time-to-solve."""
+    """Checkpointing, evaluation (best model with stats), reward-term logging, time-to-solve:
+    the callback list, and its evaluation callback (which counts the evaluations it skipped)."""
     from stable_baselines3.common.callbacks import CallbackList
 
-    from .callbacks import AtomicCheckpoint, RewardTermLogger, SaveBest, SolveTimer
+    from .callbacks import AtomicCheckpoint, GatedEvaluation, RewardTermLogger, SaveBest, SolveTimer
 
     eval_every = max(args.eval_freq // args.n_envs, 1)
     evaluation = GatedEvaluation(
@@ -113,7 +116,7 @@ def build_callbacks(args: argparse.Namespace, run_dir: Path, eval_env, meta: Dic
         callback_after_eval=SolveTimer(run_dir, meta, summary, t_start, args.target_success, args.stop_at_success),
         verbose=0, min_training_success=float(getattr(args, "eval_min_training_success", 0.0)),
     )
-    return CallbackList([AtomicCheckpoint(run_dir, meta, args.checkpoint_freq), RewardTermLogger(), evaluation])
+    return CallbackList([AtomicCheckpoint(run_dir, meta, args.checkpoint_freq), RewardTermLogger(), evaluation]), evaluation
 
 
 def close_vec_env(venv, interrupted: bool) -> None:
@@ -141,8 +144,7 @@ def write_run_config(run_dir: Path, args: argparse.Namespace, hyper: Hyperparame
         "timesteps": args.timesteps, "hyperparams_resolved": hyper.to_dict(),
         "checkpoint_freq": args.checkpoint_freq, "eval_freq": args.eval_freq,
         "eval_episodes": args.eval_episodes, "no_subprocess": args.no_subprocess,
-        "target_success": args.target_success, "eval_envs": int(getattr(args, "eval_envs", 1)),
-        "eval_min_training_success": float(getattr(args, "eval_min_training_success", 0.0)), **extra})
+        "target_success": args.target_success, "eval_min_training_success": float(getattr(args, "eval_min_training_success", 0.0)), **extra})
 
 
 def initialise_from(model_dir: Path, task: str, algo: str, venv, meta: Dict[str, Any], run_dir: Path,
@@ -278,7 +280,7 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
         for key in ("task", "algo", "seed", "n_envs", "hyperparams_resolved", "timesteps"):
             setattr(args, key, saved[key])
         for key in ("checkpoint_freq", "eval_freq", "eval_episodes", "no_subprocess", "target_success",
-                    "eval_envs", "eval_min_training_success"):
+                    "eval_min_training_success"):
             if key in saved and getattr(args, key, None) == defaults.get(key):
                 setattr(args, key, saved[key])  # keep the run's settings unless given again
         source = str(args.run_dir / "config.json")
@@ -292,8 +294,6 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
             args.run_dir = Path("runs") / f"{args.task}_{args.algo}_{time.strftime('%Y%m%d-%H%M%S')}"
     if getattr(args, "processes", None) is not None and args.processes < 1:
         raise ConfigError(f"--processes must be at least 1, got {args.processes}")
-    if int(getattr(args, "eval_envs", 1)) < 1:
-        raise ConfigError(f"--eval-envs must be at least 1, got {args.eval_envs}")
     if not 0.0 <= float(getattr(args, "eval_min_training_success", 0.0)) <= 1.0:
         raise ConfigError(f"--eval-min-training-success must be in [0, 1], got {args.eval_min_training_success}")
     for warning in check_hyperparameters(args.algo, hyper, args.n_envs, source):
@@ -314,12 +314,7 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
     venv = make_vec_env(args.task, env_overrides, args.n_envs, args.seed, run_dir / "monitor",
                         not args.no_subprocess, getattr(args, "start_method", "forkserver"),
                         getattr(args, "processes", None), hyper.expert_start)
-    eval_envs = int(getattr(args, "eval_envs", 1))
-    # Several evaluation environments step together (one batched policy call for all of them),
-    # spread over the training's processes unless it runs in one.
-    eval_env = make_vec_env(args.task, env_overrides, eval_envs, args.seed + EVAL_SEED_OFFSET, None,
-                            eval_envs > 1 and not args.no_subprocess, getattr(args, "start_method", "forkserver"),
-                            getattr(args, "processes", None))
+    eval_env = make_vec_env(args.task, env_overrides, 1, args.seed + EVAL_SEED_OFFSET, None, False)
     algo_cls = algorithm_class(args.algo)
     latest = run_dir / "checkpoints" / "latest"
     summary_path = run_dir / "summary.json"
@@ -352,7 +347,7 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
                             clip_obs=venv.clip_obs)
     summary.update({"task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
                     "machine": machine_description(), "target_success": args.target_success})
-    callbacks = build_callbacks(args, run_dir, eval_env, meta, t_start - elapsed_before, summary)
+    callbacks, evaluation = build_callbacks(args, run_dir, eval_env, meta, t_start - elapsed_before, summary)
     if hyper.critic_warmup is not None:
         from .callbacks import CriticWarmup
 
@@ -374,14 +369,13 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
     save_checkpoint(model, run_dir, meta)
     if not interrupted:
         save_model_dir(run_dir / "final", model, venv, {**meta, "num_timesteps": int(model.num_timesteps)})
-    gate = next(c for c in callbacks.callbacks if isinstance(c, GatedEvaluation))
-    summary["evaluations_skipped"] = int(summary.get("evaluations_skipped", 0)) + gate.skipped
+    summary["evaluations_skipped"] = int(summary.get("evaluations_skipped", 0)) + evaluation.skipped
     summary.update({"num_timesteps": int(model.num_timesteps),
                     "wall_time_s": round(elapsed_before + time.time() - t_start, 1),
                     "finished": not interrupted})
     write_json_atomic(summary_path, summary)
     close_vec_env(venv, interrupted)
-    close_vec_env(eval_env, interrupted)
+    eval_env.close()
     print(f"train.py: {'stopped' if interrupted else 'done'} at {model.num_timesteps} steps; "
           f"run directory {run_dir}")
     return 130 if interrupted else 0
