@@ -403,6 +403,33 @@ def test_the_step_observes_the_actions_it_sent_as_the_environment_does(latency):
     env.close()
 
 
+def test_the_step_builds_the_joint_step_hint_as_the_environment_does():
+    """With ``observation.joint_step_hint`` (config/ppo_reach.yaml), the node's observation is the
+    environment's, hint included, period by period, fed the same states."""
+    import gymnasium as gym
+
+    import fr5_rl  # noqa: F401  (registers the environments)
+    from fr5_rl.training.algorithms import load_hyperparameters
+
+    overrides = {"observation": load_hyperparameters("ppo", "reach").env["observation"]}
+    assert overrides["observation"]["joint_step_hint"], "config/ppo_reach.yaml should turn the hint on"
+    env = gym.make("FR5Reach-v0", config=overrides).unwrapped
+    actions = np.random.default_rng(5).uniform(-1.0, 1.0, (8, 7))
+    policy = ScriptedPolicy(actions, "reach", 23 + 6)
+    step = DeploymentStep(policy, ROBOT, load_env_config(overrides), joint_state_timeout=0.1, target_timeout=0.5)
+    observation, _ = env.reset(seed=4)
+    for period, action in enumerate(actions):
+        state = env.task_state()
+        joints = Reading(ArmJointState(np.asarray(state.joint_positions), np.asarray(state.joint_velocities),
+                                       state.gripper_width), NOW)
+        command = step(StepInputs(NOW, joints, Reading(tuple(state.object_position), NOW)))
+        assert isinstance(command, Command), command
+        np.testing.assert_allclose(policy.seen[period], observation, atol=1e-6, err_msg=f"period {period}")
+        assert np.abs(observation[23:]).max() > 0.05  # the hint is there, not zeros
+        observation, *_ = env.step(action)
+    env.close()
+
+
 def test_a_hold_clears_the_previous_actions():
     """After a hold the arm stood still: the block reads zeros again, as at an episode start."""
     env_cfg = load_env_config({"observation": {"previous_actions": 2}})

@@ -179,3 +179,26 @@ def test_policy_node_logs_fatal_and_exits_nonzero(tmp_path):
     fatal = [line for line in output.splitlines() if "FATAL" in line]
     assert fatal and str(model / "vecnormalize.pkl") in fatal[0], output
     assert "Traceback" not in output, output
+
+
+def test_a_ctrl_c_during_a_save_takes_effect_once_the_save_is_done():
+    """Ctrl-C half-way through a checkpoint used to surface as torch's zip-writer error (the
+    trainer crashed instead of saving and exiting 130): the interrupt now waits for the block."""
+    import signal
+
+    from fr5_rl.runtime.bundle import interrupts_deferred
+
+    finished = []
+    outer = signal.signal(signal.SIGINT, signal.default_int_handler)  # a terminal's Python process
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with interrupts_deferred():
+                os.kill(os.getpid(), signal.SIGINT)
+                finished.append("the rest of the save")
+        assert finished == ["the rest of the save"]
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler is back
+        with interrupts_deferred():  # no Ctrl-C: nothing happens afterwards
+            finished.append("a quiet save")
+        assert finished[-1] == "a quiet save"
+    finally:
+        signal.signal(signal.SIGINT, outer)

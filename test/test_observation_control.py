@@ -358,3 +358,101 @@ def test_a_builder_without_previous_actions_refuses_some():
         history_builder(0).build(inputs(previous_actions=[0.0] * 6))
     with pytest.raises(ValueError, match="6 previous-action values"):
         history_builder(1).build(inputs())
+
+
+# ----------------------------------------------------------------------------- joint-step hint
+HINT = {"cartesian_step": 0.015, "rotation_step": 0.05, "damping": 0.05, "joint_step_scale": 0.04}
+# A pose from which the tcp can move every way: elbow bent, wrist pointing roughly down.
+BENT = np.array([0.3, -1.2, 1.6, -2.0, -1.5, 0.2])
+
+
+def hint_builder(include_lift: bool = False, **changes) -> ObservationBuilder:
+    return ObservationBuilder(SPEC, {**CFG["observation"], "joint_step_hint": {**HINT, **changes}}, include_lift)
+
+
+def test_tcp_jacobian_matches_finite_differences_of_the_tcp_pose():
+    from fr5_rl.kinematics import ForwardKinematics
+
+    kinematics = ForwardKinematics(SPEC)
+    for q in np.random.default_rng(3).uniform(SPEC.lower_limits / 2, SPEC.upper_limits / 2, (5, 6)):
+        position, axis, jacobian = kinematics.tcp_jacobian(q.tolist())
+        position_now, rotation_now = kinematics.tcp_pose(q)
+        np.testing.assert_allclose(position, position_now, atol=1e-12)
+        np.testing.assert_allclose(axis, rotation_now[:, 2], atol=1e-12)
+        jacobian, eps = np.array(jacobian), 1e-7
+        for joint in range(6):
+            moved = q.copy()
+            moved[joint] += eps
+            position_moved, rotation_moved = kinematics.tcp_pose(moved)
+            turn = (rotation_moved @ rotation_now.T - np.eye(3)) / eps  # skew matrix of the angular velocity
+            np.testing.assert_allclose(jacobian[:3, joint], (position_moved - position_now) / eps, atol=1e-5)
+            np.testing.assert_allclose(jacobian[3:, joint], [turn[2, 1], turn[0, 2], turn[1, 0]], atol=1e-5)
+
+
+def test_the_hint_comes_last_and_the_rest_is_unchanged():
+    from fr5_rl.observation import observation_size
+
+    for include_lift, task, base in ((False, "reach", REACH_OBSERVATION_SIZE), (True, "grasp", GRASP_OBSERVATION_SIZE)):
+        builder = hint_builder(include_lift)
+        assert builder.size == base + 6 == observation_size(task, {"joint_step_hint": HINT})
+        state = inputs(joint_positions=BENT, object_position=np.array([-0.5, 0.1, 0.03]))
+        observation = builder.build(state)
+        np.testing.assert_allclose(observation[:base], ObservationBuilder(SPEC, CFG["observation"], include_lift).build(state))
+        np.testing.assert_allclose(observation[base:], builder.joint_step_hint(BENT, [-0.5, 0.1, 0.03]), atol=1e-7)
+        assert np.all(np.abs(observation[base:]) <= 1.0)
+
+
+@pytest.mark.parametrize("offset", [(0.3, 0.0, -0.2), (-0.1, 0.25, 0.05), (0.0, 0.0, -0.3), (0.008, -0.004, 0.002)])
+def test_the_hinted_step_moves_the_tcp_toward_the_object(offset):
+    """Far away the step moves the tcp about cartesian_step straight at the object; within one
+    step it closes most of the remaining offset."""
+    from fr5_rl.kinematics import ForwardKinematics
+
+    kinematics = ForwardKinematics(SPEC)
+    builder = hint_builder(rotation_step=1e-6)  # position only, to measure it alone
+    tcp, _ = kinematics.tcp_pose(BENT)
+    target = tcp + np.asarray(offset)
+    step = np.asarray(builder.joint_step_hint(BENT, target)) * HINT["joint_step_scale"]
+    moved, _ = kinematics.tcp_pose(BENT + step)
+    before, after = np.linalg.norm(target - tcp), np.linalg.norm(target - moved)
+    if before > HINT["cartesian_step"]:
+        assert before - after == pytest.approx(HINT["cartesian_step"], abs=0.003)
+        direction = (moved - tcp) / np.linalg.norm(moved - tcp)
+        assert direction @ (target - tcp) / before > 0.98
+    else:
+        assert after < 0.3 * before
+
+
+def test_the_hint_turns_the_approach_axis_toward_straight_down():
+    from fr5_rl.kinematics import ForwardKinematics
+
+    kinematics = ForwardKinematics(SPEC)
+    builder = hint_builder(cartesian_step=1e-6)  # orientation only
+    q = BENT + np.array([0.0, 0.0, 0.0, 0.4, 0.3, 0.0])  # wrist turned: about 30 degrees off down
+    angles = []
+    for _ in range(40):
+        tcp, rotation = kinematics.tcp_pose(q)
+        angles.append(np.degrees(np.arccos(-rotation[2, 2])))
+        q = q + np.asarray(builder.joint_step_hint(q, tcp)) * HINT["joint_step_scale"]
+    assert angles[0] > 25.0 and angles[-1] < 0.5
+    assert angles[0] - angles[1] == pytest.approx(np.degrees(HINT["rotation_step"]), abs=0.5)  # the capped turn
+    assert np.all(np.diff(angles) < 1e-6)  # every step turns it further down
+
+
+@pytest.mark.parametrize("bad", [{"cartesian_step": 0.015}, {**HINT, "extra": 1.0}, {**HINT, "damping": -0.05},
+                                 {**HINT, "joint_step_scale": 0.0}, {**HINT, "rotation_step": "fast"},
+                                 {**HINT, "cartesian_step": True}, {**HINT, "damping": float("inf")}, [0.015] * 4],
+                         ids=["missing", "unknown", "negative", "zero", "text", "bool", "inf", "list"])
+def test_a_malformed_hint_setting_is_refused(bad):
+    from fr5_rl.config import ConfigError
+
+    with pytest.raises(ConfigError, match="joint_step_hint"):
+        load_env_config({"observation": {"joint_step_hint": bad}})
+
+
+def test_a_model_from_before_the_hint_is_read_as_having_none():
+    from fr5_rl.observation import observation_size, saved_observation_settings
+
+    old = {key: value for key, value in CFG["observation"].items() if key not in ("previous_actions", "joint_step_hint")}
+    assert saved_observation_settings(old) == {**old, "previous_actions": 0, "joint_step_hint": None}
+    assert observation_size("reach", old) == REACH_OBSERVATION_SIZE

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from fr5_rl.config import ConfigError, package_root
 from fr5_rl.cli import evaluate, train
@@ -45,6 +46,13 @@ algo_kwargs:
   policy_kwargs:
     net_arch: {pi: [32, 32], vf: [32, 32]}
 """
+
+# The default PPO reach model (the ppo_run fixture) carries the joint-step hint: 23 + 6 values.
+DEFAULT_REACH_SIZE = 29
+# FAST_PPO with the default reach config's observation: a run that can start from ppo_run's model.
+FAST_PPO_WITH_HINT = FAST_PPO.replace(
+    "env: {}", "env: {observation: {joint_step_hint: "
+    "{cartesian_step: 0.015, rotation_step: 0.05, damping: 0.05, joint_step_scale: 0.04}}}")
 
 OFF_POLICY = """\
 n_timesteps: 600
@@ -120,7 +128,8 @@ def assert_model_dir(directory: Path, task="reach", algo="ppo") -> dict:
         assert (directory / name).is_file() and (directory / name).stat().st_size > 0, name
     meta = read_json(directory / "meta.json")
     assert meta["task"] == task and meta["algo"] == algo
-    assert meta["observation_size"] == (23 if task == "reach" else 24) and meta["action_size"] == 7
+    hint = 6 if meta["env_config"]["observation"].get("joint_step_hint") else 0  # the joint-step hint's block
+    assert meta["observation_size"] == (23 if task == "reach" else 24) + hint and meta["action_size"] == 7
     return meta
 
 
@@ -145,6 +154,7 @@ def model_copy(ppo_run, tmp_path) -> Path:
 def test_short_ppo_run_writes_checkpoint(ppo_run):
     latest = ppo_run / "checkpoints" / "latest"
     meta = assert_model_dir(latest)
+    assert meta["observation_size"] == DEFAULT_REACH_SIZE  # config/ppo_reach.yaml turns the hint on
     assert meta["num_timesteps"] >= 3000
     assert meta["control_dt"] == 0.02
     assert_model_dir(ppo_run / "final")
@@ -374,11 +384,11 @@ def test_observation_size_mismatch_refused(model_copy):
     from fr5_rl.runtime.policy import load_policy
 
     policy = load_policy(model_copy, "torch", expected_task="reach")
-    assert policy.act(np.zeros(23, dtype=np.float32)).shape == (7,)
+    assert policy.act(np.zeros(DEFAULT_REACH_SIZE, dtype=np.float32)).shape == (7,)
     with pytest.raises(ValueError):
-        policy.act(np.zeros(24, dtype=np.float32))
+        policy.act(np.zeros(23, dtype=np.float32))  # without the hint
     with pytest.raises(ValueError):
-        policy.act(np.full(23, np.nan, dtype=np.float32))
+        policy.act(np.full(DEFAULT_REACH_SIZE, np.nan, dtype=np.float32))
     with pytest.raises(ModelFilesError, match="grasp"):
         load_policy(model_copy, "torch", expected_task="grasp")
     # meta.json that disagrees with model.zip
@@ -396,7 +406,7 @@ def test_onnx_backend_needs_export_and_checks_size(model_copy):
     with pytest.raises(ModelFilesError, match="export_onnx"):
         load_policy(model_copy, "onnx")
     export(model_copy)
-    assert load_policy(model_copy, "onnx").act(np.zeros(23, dtype=np.float32)).shape == (7,)
+    assert load_policy(model_copy, "onnx").act(np.zeros(DEFAULT_REACH_SIZE, dtype=np.float32)).shape == (7,)
     meta = read_json(model_copy / "meta.json")
     meta["observation_size"] = 24
     (model_copy / "meta.json").write_text(json.dumps(meta))
@@ -536,7 +546,7 @@ def test_init_from_applies_this_runs_settings_and_warms_the_critic_up(ppo_run, t
     from stable_baselines3 import PPO
 
     source = ppo_run / "checkpoints" / "latest"
-    hyper = write(tmp_path / "fine.yaml", FAST_PPO.replace("n_steps: 256", "n_steps: 128")
+    hyper = write(tmp_path / "fine.yaml", FAST_PPO_WITH_HINT.replace("n_steps: 256", "n_steps: 128")
                   .replace("learning_rate: 0.0003", "learning_rate: 0.00002")
                   + "  clip_range: 0.05\n" + "critic_warmup: {steps: 256, learning_rate: 0.001}\n")
 
@@ -565,7 +575,8 @@ def test_init_from_applies_this_runs_settings_and_warms_the_critic_up(ppo_run, t
 def test_init_from_with_more_previous_actions_starts_from_the_same_policy(ppo_run, tmp_path):
     """A model trained without previous actions in its observation can start a run that has them:
     the widened network acts exactly as the source on every observation, whatever the new values
-    hold (their weights start at zero), and the run trains from there."""
+    hold (their weights start at zero), and the run trains from there. The new block goes where
+    the layout puts it, before the joint-step hint, which keeps its weights."""
     import gymnasium as gym
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv
@@ -575,25 +586,28 @@ def test_init_from_with_more_previous_actions_starts_from_the_same_policy(ppo_ru
     from fr5_rl.training.train import load_widened
 
     source = ppo_run / "checkpoints" / "latest"
-    venv = DummyVecEnv([lambda: gym.make("FR5Reach-v0", config={"observation": {"previous_actions": 2}})])
-    model, widened = load_widened(source, PPO, venv, 12, seed=0)
+    hint = yaml.safe_load(FAST_PPO_WITH_HINT)["env"]["observation"]["joint_step_hint"]
+    observation_cfg = {"previous_actions": 2, "joint_step_hint": hint}
+    venv = DummyVecEnv([lambda: gym.make("FR5Reach-v0", config={"observation": observation_cfg})])
+    model, widened = load_widened(source, PPO, venv, [(23, 12)], seed=0)
     before = load_policy(source, "torch")
     rng = np.random.default_rng(0)
     for _ in range(20):
-        observation = rng.uniform(-1, 1, 23).astype(np.float32)
+        observation = rng.uniform(-1, 1, DEFAULT_REACH_SIZE).astype(np.float32)
         previous = rng.uniform(-1, 1, 12).astype(np.float32)
-        action, _ = model.predict(widened.normalize_obs(np.concatenate([observation, previous])), deterministic=True)
+        wide = np.concatenate([observation[:23], previous, observation[23:]])
+        action, _ = model.predict(widened.normalize_obs(wide), deterministic=True)
         np.testing.assert_allclose(np.clip(action, -1, 1), before.act(observation), atol=1e-5)
     venv.close()
 
-    hyper = write(tmp_path / "wide.yaml", FAST_PPO.replace("env: {}", "env: {observation: {previous_actions: 2}}"))
+    hyper = write(tmp_path / "wide.yaml", FAST_PPO_WITH_HINT.replace("{observation: {", "{observation: {previous_actions: 2, "))
     run_dir = tmp_path / "wide"
     code = train.main(["--init-from", str(source), "--hyperparams", str(hyper), "--timesteps", "256", "--n-envs", "1",
                        "--no-subprocess", "--eval-freq", "100000", "--no-progress", "--run-dir", str(run_dir)])
     assert code == 0
     meta = read_json(run_dir / "final" / "meta.json")
-    assert meta["observation_size"] == 35 and meta["initialised_from"]["model"] == str(source)
-    assert load_policy(run_dir / "final", "torch").act(np.zeros(35)).shape == (7,)
+    assert meta["observation_size"] == DEFAULT_REACH_SIZE + 12 and meta["initialised_from"]["model"] == str(source)
+    assert load_policy(run_dir / "final", "torch").act(np.zeros(DEFAULT_REACH_SIZE + 12)).shape == (7,)
 
 
 def test_critic_warmup_settings_are_checked(tmp_path):
@@ -647,3 +661,54 @@ def test_train_runs_with_expert_starts(tmp_path):
     steps, rate = training_success(run_dir / "monitor")
     assert steps[-1] <= 1024 and len(steps) == len(rate) and ((rate >= 0) & (rate <= 1)).all()
     assert plot_learning_curve(run_dir, tmp_path / "curve.png").stat().st_size > 10_000
+
+
+def test_the_shipped_reach_model_fine_tunes_with_the_default_config_and_its_hint(tmp_path):
+    """README: ``train.py --task reach --init-from models/reach``. The shipped model was trained
+    without the joint-step hint that config/ppo_reach.yaml now adds: the run widens it by those 6
+    values (zero weights), so it starts acting exactly as the shipped model does."""
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    import fr5_rl  # noqa: F401
+    from fr5_rl.runtime.policy import load_policy
+    from fr5_rl.training.train import load_widened
+
+    shipped = REPO / "models" / "reach"
+    assert read_json(shipped / "meta.json")["observation_size"] == 23
+    hint = yaml.safe_load(FAST_PPO_WITH_HINT)["env"]["observation"]
+    venv = DummyVecEnv([lambda: gym.make("FR5Reach-v0", config={"observation": hint})])
+    model, widened = load_widened(shipped, PPO, venv, [(23, 6)], seed=0)
+    before = load_policy(shipped, "torch")
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        observation = rng.uniform(-1, 1, 23).astype(np.float32)
+        wide = np.concatenate([observation, rng.uniform(-1, 1, 6).astype(np.float32)])
+        action, _ = model.predict(widened.normalize_obs(wide), deterministic=True)
+        np.testing.assert_allclose(np.clip(action, -1, 1), before.act(observation), atol=1e-5)
+    venv.close()
+
+    run_dir = tmp_path / "fine"
+    code = train.main(["--task", "reach", "--init-from", str(shipped), "--timesteps", "256", "--n-envs", "2",
+                       "--no-subprocess", "--eval-freq", "100000", "--no-progress", "--run-dir", str(run_dir)])
+    assert code == 0
+    assert read_json(run_dir / "final" / "meta.json")["observation_size"] == DEFAULT_REACH_SIZE
+
+
+def test_added_observation_blocks_say_where_the_new_values_go():
+    from fr5_rl.training.train import added_observation_blocks
+
+    hint = {"cartesian_step": 0.015, "rotation_step": 0.05, "damping": 0.05, "joint_step_scale": 0.04}
+
+    def meta(size, previous=0, with_hint=False):
+        return {"observation_size": size, "env_config": {"observation": {
+            "previous_actions": previous, "joint_step_hint": hint if with_hint else None}}}
+
+    assert added_observation_blocks(meta(23), meta(29, with_hint=True)) == [(23, 6)]
+    assert added_observation_blocks(meta(29, with_hint=True), meta(41, 2, True)) == [(23, 12)]
+    assert added_observation_blocks(meta(35, 2), meta(47, 3, True)) == [(35, 6), (35, 6)]
+    assert added_observation_blocks(meta(23), meta(23)) == []  # nothing new
+    assert added_observation_blocks(meta(29, with_hint=True), meta(23)) == []  # a block taken away
+    assert added_observation_blocks(meta(35, 2), meta(29, 1)) == []
+    assert added_observation_blocks(meta(24), meta(29, with_hint=True)) == []  # another layout (grasp)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 import os
 import typing
 from dataclasses import dataclass
@@ -219,6 +220,15 @@ def validate_env_config(cfg: Mapping[str, Any], robot: RobotSpec) -> None:
     previous = cfg["observation"].get("previous_actions", 0)
     if isinstance(previous, bool) or not isinstance(previous, int) or not 0 <= previous <= 4:
         raise ConfigError(f"observation.previous_actions must be a whole number from 0 to 4, got {previous!r}")
+    hint = cfg["observation"].get("joint_step_hint")
+    if hint is not None:
+        keys = ("cartesian_step", "rotation_step", "damping", "joint_step_scale")
+        if not isinstance(hint, Mapping) or set(hint) != set(keys):
+            raise ConfigError(f"observation.joint_step_hint must be null or a mapping of {', '.join(keys)}, got {hint!r}")
+        for key in keys:
+            value = hint[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 < float(value) < math.inf:
+                raise ConfigError(f"observation.joint_step_hint.{key} must be a positive number, got {value!r}")
     if cfg["reward"]["mode"] not in ("dense", "sparse"):
         raise ConfigError("reward.mode must be 'dense' or 'sparse'")
     low, high = np.asarray(cfg["object"]["region_low"]), np.asarray(cfg["object"]["region_high"])

@@ -7,7 +7,7 @@ All poses are expressed in ``base_link``; positions in metres.
 from __future__ import annotations
 
 import math
-from typing import Sequence, Tuple
+from typing import List, Sequence, Tuple
 
 import numpy as np
 
@@ -65,6 +65,48 @@ class ForwardKinematics:
             r20, r21, r22 = (r20 * m00 + r21 * m10 + r22 * m20, r20 * m01 + r21 * m11 + r22 * m21,
                              r20 * o02 + r21 * o12 + r22 * o22)
         return np.array((px, py, pz)), np.array(((r00, r01, r02), (r10, r11, r12), (r20, r21, r22)))
+
+    def tcp_jacobian(self, joint_positions: Sequence[float]) -> Tuple[List[float], List[float], List[List[float]]]:
+        """The tcp's position (m), approach axis (its z, unit) and geometric Jacobian in base_link.
+
+        :param joint_positions: j1..j6 (rad).
+        :return: ``(position, approach_axis, jacobian)``, plain floats; ``jacobian`` has six rows
+            (tcp linear velocity in m/s, then angular velocity in rad/s) of six columns (per
+            rad/s of each joint). Every FR5 joint turns about its own frame's z axis, so column
+            ``i`` is ``(axis_i x (tcp - origin_i), axis_i)``.
+        """
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        px = py = pz = 0.0
+        joints = []  # (origin, axis) of each joint in base_link
+        for (o00, o01, o02, o10, o11, o12, o20, o21, o22, tx, ty, tz), angle in zip(
+            self._origins_flat, joint_positions
+        ):
+            px += r00 * tx + r01 * ty + r02 * tz
+            py += r10 * tx + r11 * ty + r12 * tz
+            pz += r20 * tx + r21 * ty + r22 * tz
+            c, s = math.cos(angle), math.sin(angle)
+            m00, m01 = o00 * c + o01 * s, o01 * c - o00 * s
+            m10, m11 = o10 * c + o11 * s, o11 * c - o10 * s
+            m20, m21 = o20 * c + o21 * s, o21 * c - o20 * s
+            r00, r01, r02 = (r00 * m00 + r01 * m10 + r02 * m20, r00 * m01 + r01 * m11 + r02 * m21,
+                             r00 * o02 + r01 * o12 + r02 * o22)
+            r10, r11, r12 = (r10 * m00 + r11 * m10 + r12 * m20, r10 * m01 + r11 * m11 + r12 * m21,
+                             r10 * o02 + r11 * o12 + r12 * o22)
+            r20, r21, r22 = (r20 * m00 + r21 * m10 + r22 * m20, r20 * m01 + r21 * m11 + r22 * m21,
+                             r20 * o02 + r21 * o12 + r22 * o22)
+            joints.append((px, py, pz, r02, r12, r22))  # the turn about z leaves the axis as it was
+        offset = self._tcp_offset
+        tx, ty, tz = px + r02 * offset, py + r12 * offset, pz + r22 * offset
+        linear_x, linear_y, linear_z, angular_x, angular_y, angular_z = [], [], [], [], [], []
+        for ox, oy, oz, ax, ay, az in joints:
+            dx, dy, dz = tx - ox, ty - oy, tz - oz
+            linear_x.append(ay * dz - az * dy)
+            linear_y.append(az * dx - ax * dz)
+            linear_z.append(ax * dy - ay * dx)
+            angular_x.append(ax)
+            angular_y.append(ay)
+            angular_z.append(az)
+        return [tx, ty, tz], [r02, r12, r22], [linear_x, linear_y, linear_z, angular_x, angular_y, angular_z]
 
     def joint_origins(self, joint_positions: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """Origins of the joint frames j1 … j6 (rows, m, base_link; j6's is the flange) and the

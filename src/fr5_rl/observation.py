@@ -19,6 +19,9 @@ index   content                                unit    mapped to [-1, 1] by
 23      object lift above its resting height   m       / observation.lift_scale (grasp only)
 then    the policy's previous arm actions      -1..1   as given (``observation.previous_actions``
         (6 each, the newest first)                     of them; 0 = none, the default)
+then    joint step toward the object (6)       rad     / joint_step_hint.joint_step_scale
+        (``observation.joint_step_hint``;              (only when the hint is configured)
+        none by default)
 ======  =====================================  ======  ==================================
 
 The previous actions make latency observable. Behind a driver that applies a command one or two
@@ -26,6 +29,13 @@ periods late, the arm still has to carry out what the policy already sent, and t
 joint state alone cannot tell a delayed arm from a slow one. They are the policy's own outputs
 (arm components, clipped to [-1, 1], before smoothing and delay): what the ROS node knows it
 sent, as the environment knows what the agent chose. :class:`ActionHistory` keeps them, for both.
+
+The joint-step hint is the arm's inverse kinematics toward the goal, from the same measured joint
+angles and object position: the joint step (damped least squares on the tcp Jacobian) that moves
+the tcp straight toward the object centre and turns its approach axis toward straight down, in
+action units. A policy learning from joint increments otherwise has to discover the arm's
+kinematics from reward; with the hint it learns *how* to follow it (over the cup, not through it)
+instead. :class:`JointStepHint` computes it, for the environments and the ROS node alike.
 
 The tcp orientation is the approach axis rather than the seed's Euler angles: with the
 gripper pointing down, roll sits at +-pi and Euler angles jump there.
@@ -35,7 +45,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from collections import deque
-from typing import Any, List, Mapping, Optional, Sequence
+from typing import Any, Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -55,10 +65,73 @@ def previous_action_count(obs_cfg: Mapping[str, Any]) -> int:
     return int(obs_cfg.get("previous_actions", 0))
 
 
+def joint_step_hint_settings(obs_cfg: Mapping[str, Any]) -> Optional[Mapping[str, Any]]:
+    """``observation.joint_step_hint``, or None where it is off (null, or a model trained before
+    the key existed). The config loader checks its values (:func:`fr5_rl.config.validate_env_config`)."""
+    return obs_cfg.get("joint_step_hint") or None
+
+
+def saved_observation_settings(obs_cfg: Mapping[str, Any]) -> Dict[str, Any]:
+    """A model's saved ``observation`` section with the keys added since filled in as that model
+    was built: no previous actions, no joint-step hint."""
+    return {**obs_cfg, "previous_actions": previous_action_count(obs_cfg),
+            "joint_step_hint": joint_step_hint_settings(obs_cfg)}
+
+
 def observation_size(task: str, obs_cfg: Mapping[str, Any]) -> int:
     """Length of the observation vector of ``task`` (``reach`` or ``grasp``) under ``obs_cfg``."""
     base = GRASP_OBSERVATION_SIZE if task == "grasp" else REACH_OBSERVATION_SIZE
-    return base + ARM_ACTION_SIZE * previous_action_count(obs_cfg)
+    hint = ARM_ACTION_SIZE if joint_step_hint_settings(obs_cfg) else 0
+    return base + ARM_ACTION_SIZE * previous_action_count(obs_cfg) + hint
+
+
+class JointStepHint:
+    """The joint step, in action units, that moves the tcp toward the object centre and turns its
+    approach axis toward straight down (base_link -z): damped least squares on the tcp Jacobian,
+    ``dq = J^T (J J^T + damping^2 I)^-1 e``.
+
+    The Cartesian error ``e`` is capped per step, so far from the object the hint is a direction
+    at a steady speed, and near it the remaining offset.
+
+    :param robot: the arm's kinematics.
+    :param settings: ``observation.joint_step_hint``: ``cartesian_step`` (m) and
+        ``rotation_step`` (rad), the most the tcp is asked to move and turn in one step;
+        ``damping`` (m), which keeps the step small near singular poses; ``joint_step_scale``
+        (rad), the step read as 1 (``action.max_joint_step``: the hint then reads as an action).
+    """
+
+    def __init__(self, robot: RobotSpec, settings: Mapping[str, Any]) -> None:
+        from .kinematics import ForwardKinematics
+
+        self._kinematics = ForwardKinematics(robot)
+        self._cartesian_step = float(settings["cartesian_step"])
+        self._rotation_step = float(settings["rotation_step"])
+        self._damping = float(settings["damping"]) ** 2 * np.eye(6)
+        self._gain = 1.0 / float(settings["joint_step_scale"])
+
+    def __call__(self, joint_positions: Sequence[float], object_position: Sequence[float]) -> List[float]:
+        """Six values in [-1, 1]: the hinted step of j1..j6 / ``joint_step_scale``.
+
+        :param joint_positions: j1..j6 (rad), finite.
+        :param object_position: object centre (m, base_link), finite.
+        """
+        (tcp_x, tcp_y, tcp_z), (axis_x, axis_y, axis_z), jacobian = self._kinematics.tcp_jacobian(joint_positions)
+        object_x, object_y, object_z = object_position
+        dx, dy, dz = object_x - tcp_x, object_y - tcp_y, object_z - tcp_z
+        distance = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if distance > self._cartesian_step:
+            shrink = self._cartesian_step / distance
+            dx, dy, dz = dx * shrink, dy * shrink, dz * shrink
+        # Rotation that takes the approach axis toward -z: axis x (0, 0, -1), |.| = sin(angle).
+        wx, wy = -axis_y, axis_x
+        turn = math.sqrt(wx * wx + wy * wy)
+        if turn > self._rotation_step:
+            wx, wy = wx * self._rotation_step / turn, wy * self._rotation_step / turn
+        jacobian = np.array(jacobian)
+        weights = np.linalg.solve(jacobian @ jacobian.T + self._damping, (dx, dy, dz, wx, wy, 0.0))
+        gain = self._gain
+        return [1.0 if value > 1.0 else (-1.0 if value < -1.0 else value)
+                for value in (jacobian.T @ weights * gain).tolist()]
 
 
 class ActionHistory:
@@ -123,6 +196,10 @@ class ObservationBuilder:
         self.previous_actions = previous_action_count(obs_cfg)
         self._state_size = GRASP_OBSERVATION_SIZE if include_lift else REACH_OBSERVATION_SIZE
         self.size = self._state_size + ARM_ACTION_SIZE * self.previous_actions
+        hint = joint_step_hint_settings(obs_cfg)
+        self.joint_step_hint: Optional[JointStepHint] = None if hint is None else JointStepHint(robot, hint)
+        if self.joint_step_hint is not None:
+            self.size += ARM_ACTION_SIZE
         low = np.asarray(obs_cfg["tcp_position_low"], dtype=np.float64)
         high = np.asarray(obs_cfg["tcp_position_high"], dtype=np.float64)
         half_width = robot.max_opening_width / 2.0
@@ -183,6 +260,8 @@ class ObservationBuilder:
                     values.append(1.0 if value > 1.0 else (-1.0 if value < -1.0 else value))
                 if history:
                     values.extend(1.0 if value > 1.0 else (-1.0 if value < -1.0 else value) for value in history)
+                if self.joint_step_hint is not None:
+                    values.extend(self.joint_step_hint(joint_positions, object_position))
         except (TypeError, ValueError) as error:  # strings, None, arrays where numbers belong
             raise ValueError(f"observation inputs must be numbers and sequences of numbers: {error}") from None
         if not finite:

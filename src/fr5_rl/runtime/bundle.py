@@ -26,10 +26,13 @@ import json
 import os
 import platform
 import shutil
+import signal
 import tempfile
+import threading
 import zipfile
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Callable, Dict, Mapping, Optional, Type
+from typing import Any, Callable, Dict, Iterator, Mapping, Optional, Type
 
 MODEL_FILE = "model.zip"
 STATS_FILE = "vecnormalize.pkl"
@@ -112,15 +115,45 @@ def write_json_atomic(path: Path, data: Mapping[str, Any]) -> None:
     os.replace(tmp, path)
 
 
+@contextmanager
+def interrupts_deferred() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) back while the block runs, then act on it as it would have.
+
+    A Ctrl-C half-way through ``model.save`` leaves torch's zip writer in an error of its own,
+    raised in place of the KeyboardInterrupt: the trainer then crashed instead of saving its
+    checkpoint and exiting 130. Only the main thread receives signals; elsewhere this does nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if received:
+        if callable(previous):
+            previous(signal.SIGINT, None)  # Python's handler raises KeyboardInterrupt
+        elif previous != signal.SIG_IGN:
+            os.kill(os.getpid(), signal.SIGINT)  # the default action, now that it is back
+
+
 def save_model_dir(directory: Path, model, vec_normalize, meta: Mapping[str, Any],
                    write_extra: Optional[Callable[[Path], None]] = None) -> Path:
     """Save model + statistics + meta (+ whatever ``write_extra(staging_dir)`` writes) together.
 
     Everything is written into a staging directory beside the target, which then replaces the
     target by renames; the previous version stays as ``.<name>.old`` until the new one is in
-    place, and :func:`recover_model_dir` brings it back after a crash in between.
+    place, and :func:`recover_model_dir` brings it back after a crash in between. A Ctrl-C
+    meanwhile takes effect once the save is done (:func:`interrupts_deferred`).
     """
-    directory = Path(directory)
+    with interrupts_deferred():
+        return _save_model_dir(Path(directory), model, vec_normalize, meta, write_extra)
+
+
+def _save_model_dir(directory: Path, model, vec_normalize, meta: Mapping[str, Any],
+                    write_extra: Optional[Callable[[Path], None]]) -> Path:
     directory.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(dir=directory.parent, prefix=f".{directory.name}."))
     try:

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..config import load_env_config, load_yaml
 from ..control import ACTION_SIZE
-from ..observation import observation_size, previous_action_count
+from ..observation import observation_size, saved_observation_settings
 from .bundle import (META_FILE, MODEL_FILE, ONNX_FILE, STATS_FILE, ModelFilesError, algorithm_class,
                      check_files_present, check_sb3_zip, damaged, read_meta)
 
@@ -186,8 +186,7 @@ def config_mismatches(meta: Mapping[str, Any], current_env: Optional[Mapping[str
                 saved = saved.get(key) if isinstance(saved, dict) else None
                 current = current.get(key) if isinstance(current, dict) else None
             if path == ("observation",) and isinstance(saved, dict):
-                # A model from before observation.previous_actions existed carries none.
-                saved = {**saved, "previous_actions": previous_action_count(saved)}
+                saved = saved_observation_settings(saved)  # a model from before a key existed
             if saved != current:
                 differences.append(f"env {'.'.join(path)}: trained with {saved}, now {current}")
     saved_robot = meta.get("robot_config")

@@ -13,7 +13,7 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 
 from ..config import ConfigError, ExpertStartSettings, Hyperparameters, load_yaml, typed
@@ -157,7 +157,7 @@ def initialise_from(model_dir: Path, task: str, algo: str, venv, meta: Dict[str,
     :raises ModelFilesError: its files are missing or damaged.
     """
     source = read_meta(model_dir)
-    added = added_previous_actions(source, meta)
+    added = added_observation_blocks(source, meta)
     for key in ("task", "algo", "observation_size", "action_size"):
         if source.get(key) != meta.get(key) and not (key == "observation_size" and added):
             raise ConfigError(f"--init-from {model_dir}: its {key} is {source.get(key)!r}, this run's is "
@@ -174,24 +174,42 @@ def initialise_from(model_dir: Path, task: str, algo: str, venv, meta: Dict[str,
     return model, venv
 
 
-def added_previous_actions(source: Dict[str, Any], meta: Dict[str, Any]) -> int:
-    """Observation values this run adds to the ``--init-from`` model's by carrying more previous
-    actions (``observation.previous_actions``), with the rest of the layout the same; else 0."""
-    from ..observation import ARM_ACTION_SIZE, previous_action_count
+def added_observation_blocks(source: Dict[str, Any], meta: Dict[str, Any]) -> List[Tuple[int, int]]:
+    """The observation values this run has and the ``--init-from`` model lacks, the rest of the
+    layout being the same: more previous actions (``observation.previous_actions``) and a
+    joint-step hint (``observation.joint_step_hint``) it was trained without.
 
-    had = previous_action_count((source.get("env_config") or {}).get("observation") or {})
-    has = previous_action_count(meta["env_config"]["observation"])
-    added = ARM_ACTION_SIZE * (has - had)
-    same_otherwise = source.get("observation_size") == meta.get("observation_size") - added
-    return added if added > 0 and same_otherwise else 0
+    :return: ``(index, count)`` blocks: ``count`` new values go before value ``index`` of the
+        model's observation (its length: at the end); empty when nothing is added or the
+        layouts differ otherwise.
+    """
+    from ..observation import ARM_ACTION_SIZE, joint_step_hint_settings, previous_action_count
+
+    had_cfg = (source.get("env_config") or {}).get("observation") or {}
+    has_cfg = meta["env_config"]["observation"]
+    had, has = previous_action_count(had_cfg), previous_action_count(has_cfg)
+    hint_had, hint_has = joint_step_hint_settings(had_cfg) is not None, joint_step_hint_settings(has_cfg) is not None
+    if has < had or (hint_had and not hint_has):
+        return []
+    old_size = int(source.get("observation_size") or 0)
+    blocks = []
+    if has > had:  # after the old previous actions, before the hint
+        blocks.append((old_size - (ARM_ACTION_SIZE if hint_had else 0), ARM_ACTION_SIZE * (has - had)))
+    if hint_has and not hint_had:  # the hint comes last
+        blocks.append((old_size, ARM_ACTION_SIZE))
+    added = sum(count for _, count in blocks)
+    return blocks if blocks and old_size + added == meta.get("observation_size") else []
 
 
-def load_widened(model_dir: Path, algo_cls, venv, added: int, seed: int, **model_kwargs: Any):
-    """The model in ``model_dir``, its inputs widened by ``added`` observation values (more
-    previous actions), acting exactly as it did: every weight it had is copied, and the weights
-    of the new inputs start at zero. Its VecNormalize statistics are widened with mean 0 and
-    variance 1 for the new values, which then adapt like the others.
+def load_widened(model_dir: Path, algo_cls, venv, blocks: Sequence[Tuple[int, int]], seed: int,
+                 **model_kwargs: Any):
+    """The model in ``model_dir``, its inputs widened by new observation values (more previous
+    actions, a joint-step hint), acting exactly as it did: every weight it had is copied, and
+    the weights of the new inputs start at zero. Its VecNormalize statistics are widened with
+    mean 0 and variance 1 for the new values, which then adapt like the others.
 
+    :param blocks: ``(index, count)``: ``count`` new values before value ``index`` of the old
+        observation (:func:`added_observation_blocks`).
     :param model_kwargs: this run's algorithm settings (the network is the saved one).
     :raises ModelFilesError: a damaged ``model.zip`` or ``vecnormalize.pkl``.
     """
@@ -212,10 +230,14 @@ def load_widened(model_dir: Path, algo_cls, venv, added: int, seed: int, **model
         venv.close()
         raise
     old_size = int(source.observation_space.shape[0])
+    before = [index for index, count in blocks for _ in range(count)]  # np.insert's positions
+    added = len(before)
+    # Where each old observation value sits in the new one.
+    moved_to = [old + sum(count for index, count in blocks if index <= old) for old in range(old_size)]
     venv = VecNormalize(venv, norm_obs=stats.norm_obs, norm_reward=stats.norm_reward, clip_obs=stats.clip_obs,
                         clip_reward=stats.clip_reward, gamma=stats.gamma, epsilon=stats.epsilon)
-    venv.obs_rms.mean = np.concatenate([stats.obs_rms.mean, np.zeros(added)])
-    venv.obs_rms.var = np.concatenate([stats.obs_rms.var, np.ones(added)])
+    venv.obs_rms.mean = np.insert(stats.obs_rms.mean, before, 0.0)
+    venv.obs_rms.var = np.insert(stats.obs_rms.var, before, 1.0)
     venv.obs_rms.count = stats.obs_rms.count
     venv.ret_rms = stats.ret_rms
     model = algo_cls(source.policy_class, venv, policy_kwargs=source.policy_kwargs, seed=seed, device="cpu",
@@ -227,10 +249,10 @@ def load_widened(model_dir: Path, algo_cls, venv, added: int, seed: int, **model
             if weight.shape == target.shape:
                 target.copy_(weight)
             elif weight.dim() == 2 and target.shape == (weight.shape[0], weight.shape[1] + added):
-                # A layer reading the observation (a critic reads it followed by the action): the
-                # new values sit right after the old observation, with zero weights.
+                # A layer reading the observation (a critic reads it followed by the action):
+                # the new values get zero weights, the old ones keep theirs where they moved.
                 target.zero_()
-                target[:, :old_size] = weight[:, :old_size]
+                target[:, moved_to] = weight[:, :old_size]
                 target[:, old_size + added:] = weight[:, old_size:]
             else:
                 raise ConfigError(f"--init-from {model_dir}: cannot widen {name} from {tuple(weight.shape)} "
