@@ -7,7 +7,7 @@ All poses are expressed in ``base_link``; positions in metres.
 from __future__ import annotations
 
 import math
-from typing import List, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -40,8 +40,9 @@ class ForwardKinematics:
         self._origins_flat = [tuple(float(v) for v in rotation.ravel()) + tuple(float(v) for v in translation)
                               for rotation, translation in zip(self._origin_rotations, self._origin_translations)]
 
-    def flange_pose(self, joint_positions: Sequence[float]) -> Tuple[np.ndarray, np.ndarray]:
-        """Return (position (3,), rotation (3, 3)) of the flange (``wrist3_Link``) in base_link.
+    def _chain(self, joint_positions: Sequence[float], joints: Optional[list] = None) -> Tuple[float, ...]:
+        """The flange pose as 12 floats: position, then rotation row-major. With ``joints``, also
+        appends each joint's origin and axis there (6 floats each, base_link).
 
         Each joint: position += R @ origin translation, then R = R @ origin rotation @ Rz(angle).
         """
@@ -64,7 +65,14 @@ class ForwardKinematics:
                              r10 * o02 + r11 * o12 + r12 * o22)
             r20, r21, r22 = (r20 * m00 + r21 * m10 + r22 * m20, r20 * m01 + r21 * m11 + r22 * m21,
                              r20 * o02 + r21 * o12 + r22 * o22)
-        return np.array((px, py, pz)), np.array(((r00, r01, r02), (r10, r11, r12), (r20, r21, r22)))
+            if joints is not None:
+                joints.append((px, py, pz, r02, r12, r22))  # the turn about z leaves the axis as it was
+        return px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22
+
+    def flange_pose(self, joint_positions: Sequence[float]) -> Tuple[np.ndarray, np.ndarray]:
+        """Return (position (3,), rotation (3, 3)) of the flange (``wrist3_Link``) in base_link."""
+        px, py, pz, *rotation = self._chain(joint_positions)
+        return np.array((px, py, pz)), np.array(rotation).reshape(3, 3)
 
     def tcp_jacobian(self, joint_positions: Sequence[float]) -> Tuple[List[float], List[float], List[List[float]]]:
         """The tcp's position (m), approach axis (its z, unit) and geometric Jacobian in base_link.
@@ -75,26 +83,8 @@ class ForwardKinematics:
             rad/s of each joint). Every FR5 joint turns about its own frame's z axis, so column
             ``i`` is ``(axis_i x (tcp - origin_i), axis_i)``.
         """
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
-        px = py = pz = 0.0
-        joints = []  # (origin, axis) of each joint in base_link
-        for (o00, o01, o02, o10, o11, o12, o20, o21, o22, tx, ty, tz), angle in zip(
-            self._origins_flat, joint_positions
-        ):
-            px += r00 * tx + r01 * ty + r02 * tz
-            py += r10 * tx + r11 * ty + r12 * tz
-            pz += r20 * tx + r21 * ty + r22 * tz
-            c, s = math.cos(angle), math.sin(angle)
-            m00, m01 = o00 * c + o01 * s, o01 * c - o00 * s
-            m10, m11 = o10 * c + o11 * s, o11 * c - o10 * s
-            m20, m21 = o20 * c + o21 * s, o21 * c - o20 * s
-            r00, r01, r02 = (r00 * m00 + r01 * m10 + r02 * m20, r00 * m01 + r01 * m11 + r02 * m21,
-                             r00 * o02 + r01 * o12 + r02 * o22)
-            r10, r11, r12 = (r10 * m00 + r11 * m10 + r12 * m20, r10 * m01 + r11 * m11 + r12 * m21,
-                             r10 * o02 + r11 * o12 + r12 * o22)
-            r20, r21, r22 = (r20 * m00 + r21 * m10 + r22 * m20, r20 * m01 + r21 * m11 + r22 * m21,
-                             r20 * o02 + r21 * o12 + r22 * o22)
-            joints.append((px, py, pz, r02, r12, r22))  # the turn about z leaves the axis as it was
+        joints: list = []
+        px, py, pz, _, _, r02, _, _, r12, _, _, r22 = self._chain(joint_positions, joints)
         offset = self._tcp_offset
         tx, ty, tz = px + r02 * offset, py + r12 * offset, pz + r22 * offset
         linear_x, linear_y, linear_z, angular_x, angular_y, angular_z = [], [], [], [], [], []

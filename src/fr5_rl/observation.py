@@ -50,6 +50,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence
 import numpy as np
 
 from .config import RobotSpec
+from .kinematics import ForwardKinematics
 
 REACH_OBSERVATION_SIZE = 23  # without previous actions
 GRASP_OBSERVATION_SIZE = 24
@@ -101,8 +102,6 @@ class JointStepHint:
     """
 
     def __init__(self, robot: RobotSpec, settings: Mapping[str, Any]) -> None:
-        from .kinematics import ForwardKinematics
-
         self._kinematics = ForwardKinematics(robot)
         self._cartesian_step = float(settings["cartesian_step"])
         self._rotation_step = float(settings["rotation_step"])

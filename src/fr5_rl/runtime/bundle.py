@@ -123,8 +123,8 @@ def interrupts_deferred() -> Iterator[None]:
     raised in place of the KeyboardInterrupt: the trainer then crashed instead of saving its
     checkpoint and exiting 130. Only the main thread receives signals; elsewhere this does nothing.
     """
-    if threading.current_thread() is not threading.main_thread():
-        yield
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is None:
+        yield  # no signals here, or a handler Python did not install and could not put back
         return
     received = []
     previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
