@@ -7,11 +7,13 @@ TASK ?= reach
 ALGO ?= ppo
 EPISODES ?= 5
 
-.PHONY: setup demo test bench bench-grasp bench-vision bench-ray train meshes lint clean help
+.PHONY: setup demo test test-fast bench bench-grasp bench-vision bench-ray train meshes lint clean help
 
 help:
 	@echo "make demo   - set up, then run the closed loop (simulator + policy) with the shipped model"
 	@echo "make test   - set up, then run the whole test suite (pytest + rostest)"
+	@echo "make test-fast - set up, then only the pure-logic tests (no training, Ray, roscore or model sweeps; < 90 s)"
+	@echo "make lint   - set up, then catkin_lint and ruff (config: ruff.toml)"
 	@echo "make bench  - set up, then run the benchmarks; figures printed and written to bench/results/"
 	@echo "make bench-ray - set up, then the Ray Tune bench (1 vs 2 nodes, ASHA vs full); BENCH_ARGS=--quick"
 	@echo "make train  - set up, then train (TASK=reach|grasp ALGO=ppo|sac|td3|tqc)"
@@ -26,34 +28,39 @@ demo: setup
 test: setup
 	@$(ENV) bash tools/run_tests.sh
 
+# The inner loop: tests marked `slow` (training runs, model sweeps, Ray clusters, roscore) are
+# left out; `make test` runs them all.
+test-fast: setup
+	@$(ENV) python -m pytest -q -m "not slow" test/
+
 # Env speed + inference latency, the ROS loop (timing, sim-to-ROS parity, one core busy), the
 # FAIRINO driver's timing emulated over 200 episodes, lockstep
 # against gym over 200 seeds per model, time to solve reach.
 # BENCH_ARGS=--quick for a smoke run; `make bench-grasp` adds the grasp time to solve (~15 min).
 bench: setup
-	@$(ENV) python tools/bench_ros.py
-	@$(ENV) python tools/bench_ros.py --busy-cores 1
-	@$(ENV) python tools/bench_timing.py --model models/reach --profile fairino
-	@$(ENV) python tools/bench_lockstep.py --model models/reach --real-time
-	@$(ENV) python tools/bench_lockstep.py --model models/grasp
-	@$(ENV) python tools/bench_train.py --task reach
-	@$(ENV) python tools/bench.py $(BENCH_ARGS)
+	@$(ENV) python tools/bench/ros_loop.py
+	@$(ENV) python tools/bench/ros_loop.py --busy-cores 1
+	@$(ENV) python tools/bench/timing.py --model models/reach --profile fairino
+	@$(ENV) python tools/bench/lockstep.py --model models/reach --real-time
+	@$(ENV) python tools/bench/lockstep.py --model models/grasp
+	@$(ENV) python tools/bench/time_to_solve.py --task reach
+	@$(ENV) python tools/bench/env_and_inference.py $(BENCH_ARGS)
 
 # Ray Tune: training throughput on 1 vs 2 local nodes, and the compute ASHA needs to find a
 # config that solves reach (95 %) against running every trial to the end. BENCH_ARGS=--quick
 # for a smoke run (minutes); the full run takes about an hour on 2 cores.
 bench-ray: setup
-	@$(ENV) python tools/bench_tune.py $(BENCH_ARGS)
+	@$(ENV) python tools/bench/tune.py $(BENCH_ARGS)
 
 bench-grasp: setup
-	@$(ENV) python tools/bench_train.py --task grasp
-	@$(ENV) python tools/bench_ros.py --model models/grasp --episodes 20
-	@$(ENV) python tools/bench.py --skip-env --model models/grasp --results bench/results/grasp
+	@$(ENV) python tools/bench/time_to_solve.py --task grasp
+	@$(ENV) python tools/bench/ros_loop.py --model models/grasp --episodes 20
+	@$(ENV) python tools/bench/env_and_inference.py --skip-env --model models/grasp --results bench/results/grasp
 
 # Vision in the loop: renderer speed, detection error (200 placements), camera and loop rates,
 # image-to-command latency, reach and grasp through the simulated camera (~10 min).
 bench-vision: setup
-	@$(ENV) python tools/bench_vision.py $(BENCH_ARGS)
+	@$(ENV) python tools/bench/vision.py $(BENCH_ARGS)
 
 train: setup
 	@$(ENV) rosrun fr5_rl train.py --task $(TASK) --algo $(ALGO)
@@ -62,7 +69,7 @@ meshes: setup
 	@$(ENV) python tools/generate_description.py
 
 lint: setup
-	@$(ENV) catkin_lint -W1 .
+	@$(ENV) catkin_lint -W1 . && ruff check .
 
 clean:
 	@bash tools/setup.sh --clean

@@ -1,4 +1,7 @@
 """Fixtures shared by several test modules."""
+import shutil
+from pathlib import Path
+
 import pytest
 
 MB = 1024 * 1024
@@ -19,3 +22,34 @@ def cluster():
     yield cluster
     ray.shutdown()
     cluster.shutdown()
+
+
+# ----------------------------------------------------------------------------- a short PPO run
+# One 3,000-step PPO reach run for the whole session: test_training and test_fine_tuning start from it.
+@pytest.fixture(scope="session")
+def ppo_run(tmp_path_factory) -> Path:
+    run_dir = tmp_path_factory.mktemp("ppo") / "run"
+    from fr5_rl.cli import train
+
+    code = train.main(["--timesteps", "3000", "--n-envs", "2", "--no-subprocess", "--checkpoint-freq", "1000",
+                       "--eval-freq", "1000", "--eval-episodes", "2", "--no-progress", "--run-dir", str(run_dir)])
+    assert code == 0
+    return run_dir
+
+
+@pytest.fixture
+def model_copy(ppo_run, tmp_path) -> Path:
+    """A private copy of the run's checkpoint, free to be damaged by the test."""
+    target = tmp_path / "model"
+    shutil.copytree(ppo_run / "checkpoints" / "latest", target)
+    return target
+
+
+@pytest.fixture
+def controller():
+    """The loopback stand-in for the FR5 controller's XML-RPC server, stopped after the test."""
+    from fr5_controller_standin import StandInController
+
+    stand_in = StandInController()
+    yield stand_in
+    stand_in.stop()

@@ -1,8 +1,13 @@
-"""tools/benchlib.py, what the benchmarks share: percentiles, verdicts, result files and
-summary.json; and the rule that nothing in tools/ imports a command-line module."""
+"""tools/bench/benchlib.py and roslaunch_run.py, what the benchmarks share: percentiles, verdicts,
+result files and summary.json; the one launch-and-collect helper (outcome logs, the roslaunch
+command, the end of a run, with a stand-in roslaunch); the rules that only that helper starts
+roslaunch and that nothing in tools/ imports a command-line module."""
 import ast
 import json
+import os
+import stat
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -10,10 +15,11 @@ import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 TOOLS = REPO / "tools"
-sys.path.insert(0, str(TOOLS))
+sys.path.insert(0, str(TOOLS / "bench"))
 
 import benchlib  # noqa: E402
-from fr5_rl.runtime.bundle import machine_description  # noqa: E402
+import roslaunch_run  # noqa: E402
+from fr5_rl.deploy.bundle import machine_description  # noqa: E402
 
 
 # ----------------------------------------------------------------------------- percentiles
@@ -168,12 +174,146 @@ def test_the_import_check_finds_forbidden_imports():
            "def f():\n    from fr5_rl.training.imitation import run_dagger\n")
     assert [line for line, _ in forbidden_imports(bad)] == [1, 2, 3, 4, 4, 5, 6, 7, 9]
     good = ("from fr5_rl.training.evaluation import run_episodes\nfrom fr5_rl.training.onnx_export import export\n"
-            "from fr5_rl.runtime.policy import load_policy\nfrom fr5_rl.training.train import make_vec_env\n")
+            "from fr5_rl.deploy.policy import load_policy\nfrom fr5_rl.training.train import make_vec_env\n")
     assert forbidden_imports(good) == []
 
 
 def test_no_tool_imports_a_command_line_or_removed_module():
-    tools = sorted(TOOLS.glob("*.py"))
-    assert {"bench.py", "bench_ros.py", "bench_train.py", "benchlib.py", "ship_model.py"} <= {p.name for p in tools}
+    tools = sorted(TOOLS.glob("*.py")) + sorted((TOOLS / "bench").glob("*.py"))
+    assert {"env_and_inference.py", "ros_loop.py", "time_to_solve.py", "benchlib.py", "roslaunch_run.py",
+            "ship_model.py"} <= {p.name for p in tools}
     offences = {p.name: forbidden_imports(p.read_text(encoding="utf-8")) for p in tools}
     assert {name: found for name, found in offences.items() if found} == {}
+
+
+
+# ----------------------------------------------------------------------------- roslaunch_run
+# Two lines as src/fr5_rl/ros/sim_node.py's _finish_episode writes them (lockstep adds late_periods).
+OUTCOME_LOG = ('{"episode": 1, "seed": 700000, "success": true, "failure": "", "steps": 57, "sim_time": 2.36}\n'
+               '\n'
+               '{"episode": 2, "seed": 700001, "success": false, "failure": "knocked_over", "steps": 120, '
+               '"sim_time": 5.8, "late_periods": 1}\n')
+
+
+def test_outcome_log_parsed_and_counted():
+    records = roslaunch_run.parse_outcomes(OUTCOME_LOG)
+    assert [r["seed"] for r in records] == [700000, 700001]
+    assert records[1]["late_periods"] == 1
+    run = roslaunch_run.LaunchRun(command=[], records=records)
+    assert (run.successes, run.episodes, run.failures) == (1, 2, ["knocked_over"])
+    assert roslaunch_run.LaunchRun(command=[]).episodes == 0
+
+
+@pytest.mark.parametrize("text", ["not json\n", '["a list"]\n', '{"episode": 1, "seed": 3, "success": true}\n'])
+def test_outcome_log_refuses_what_the_simulator_does_not_write(text):
+    with pytest.raises(ValueError, match="line 1"):
+        roslaunch_run.parse_outcomes(text)
+
+
+def test_outcome_log_read_from_file(tmp_path):
+    assert roslaunch_run.read_outcomes(tmp_path / "missing.jsonl") == []
+    (tmp_path / "log.jsonl").write_text(OUTCOME_LOG)
+    assert len(roslaunch_run.read_outcomes(tmp_path / "log.jsonl")) == 2
+
+
+def test_launch_command_spells_the_arguments_as_roslaunch_reads_them():
+    command = roslaunch_run.launch_command({"rviz": False, "lockstep": True, "model": "models/reach", "episodes": 20,
+                                            "camera_rate": None, "outcome_log": Path("/tmp/x.jsonl")}, 11411)
+    assert command == ["roslaunch", "-p", "11411", "fr5_rl", "sim_policy.launch", "rviz:=false", "lockstep:=true",
+                       "model:=models/reach", "episodes:=20", "camera_rate:=", "outcome_log:=/tmp/x.jsonl"]
+    assert roslaunch_run.master_uri(11411) == "http://localhost:11411"
+    assert roslaunch_run.default_timeout(20) > roslaunch_run.default_timeout(2) > 0
+
+
+def test_end_of_run_lines():
+    assert roslaunch_run.ends_run("success rate: 19/20\n")
+    assert roslaunch_run.ends_run("REQUIRED process [camera-3] has died!\n")
+    assert not roslaunch_run.ends_run("[INFO] [/fr5_sim]: episode 3 (seed 700002): success after 40 steps\n")
+    assert not roslaunch_run.ends_run("lockstep: 12.0 s simulated in 4.1 s of wall time (2.9x real time)\n")
+
+
+def test_sim_policy_launch_passes_outcome_log_to_the_simulator():
+    """The helper sets ``outcome_log:=FILE``: the launch file must take it and hand it to the sim node."""
+    launch = (REPO / "launch" / "sim_policy.launch").read_text(encoding="utf-8")
+    assert '<arg name="outcome_log"' in launch
+    assert '<param name="outcome_log" value="$(arg outcome_log)"/>' in launch
+    assert "outcome_log:" in (REPO / "config" / "sim_node.yaml").read_text(encoding="utf-8")
+
+
+FAKE_ROSLAUNCH = """#!/bin/sh
+# Stand-in for roslaunch: writes two outcomes to the outcome_log argument, prints the simulator's
+# last line (unless FAKE_SILENT is set), then runs until it is stopped; FAKE_FAIL: fails at once.
+for arg in "$@"; do case "$arg" in outcome_log:=*) log="${arg#outcome_log:=}";; esac; done
+echo "started $*"
+[ -z "$FAKE_FAIL" ] || { echo "RLException: multiple files named [sim_policy.launch]"; exit 1; }
+printf '%s\\n' '{"episode": 1, "seed": 5, "success": true, "failure": "", "steps": 9, "sim_time": 1.0}' >> "$log"
+printf '%s\\n' '{"episode": 2, "seed": 6, "success": false, "failure": "timeout", "steps": 50, "sim_time": 2.0}' >> "$log"
+[ -n "$FAKE_SILENT" ] || echo "success rate: 1/2"
+exec sleep 60
+"""
+
+
+@pytest.fixture
+def fake_roslaunch(tmp_path, monkeypatch):
+    script = tmp_path / "bin" / "roslaunch"
+    script.parent.mkdir()
+    script.write_text(FAKE_ROSLAUNCH)
+    script.chmod(script.stat().st_mode | stat.S_IXUSR)
+    monkeypatch.setenv("PATH", f"{script.parent}{os.pathsep}{os.environ['PATH']}")
+    return script
+
+
+def test_run_launch_collects_the_outcome_log_and_stops_the_launch(fake_roslaunch):
+    started = time.time()
+    run = roslaunch_run.run_launch({"rviz": False, "episodes": 2, "seed": 5}, port=11499, episodes=2, timeout=30)
+    assert time.time() - started < 20  # stopped at the end line, not at the timeout
+    assert [r["seed"] for r in run.records] == [5, 6]
+    assert (run.successes, run.episodes, run.failures) == (1, 2, ["timeout"])
+    assert not run.timed_out and run.returncode is None  # it had to be stopped
+    assert run.command[:5] == ["roslaunch", "-p", "11499", "fr5_rl", "sim_policy.launch"]
+    assert run.command[-1].startswith("outcome_log:=")
+    assert run.lines_starting("started") and 0 < run.wall_s < 20
+    with pytest.raises(ValueError):
+        roslaunch_run.run_launch({"outcome_log": "x"}, port=11499, episodes=1)
+
+
+def test_run_launch_times_out(fake_roslaunch, monkeypatch):
+    monkeypatch.setenv("FAKE_SILENT", "1")
+    run = roslaunch_run.run_launch({}, port=11499, episodes=2, timeout=1.0)
+    assert run.timed_out and 1.0 <= run.wall_s < 10
+    assert run.episodes == 2  # what the log holds is kept
+
+
+def test_run_launch_that_fails_at_once_neither_hangs_nor_listens(fake_roslaunch, monkeypatch):
+    """A bench that listens must not wait forever for a master that roslaunch never started."""
+    pytest.importorskip("rospy")
+    monkeypatch.setenv("FAKE_FAIL", "1")
+    monkeypatch.setenv("ROS_MASTER_URI", "http://localhost:11499")  # run_launch sets it: restored after
+    listened = []
+    started = time.time()
+    run = roslaunch_run.run_launch({}, port=11499, episodes=2, timeout=60, listen=lambda: listened.append(1) or [])
+    assert time.time() - started < 20 and not run.timed_out
+    assert listened == [] and run.records == [] and run.returncode == 1
+    assert run.lines_starting("RLException")
+
+
+def _string_constants(path: Path):
+    return [node.value for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+            if isinstance(node, ast.Constant) and isinstance(node.value, str)]
+
+
+def offending_launch_code(path: Path):
+    """Strings in a bench that would start roslaunch or read outcomes from its printed text."""
+    return [text for text in _string_constants(path)
+            if text == "roslaunch" or "success rate:" in text or "failure \\(" in text]
+
+
+def test_only_the_helper_starts_roslaunch_or_reads_its_printed_outcomes(tmp_path):
+    benches = sorted((TOOLS / "bench").glob("*.py"))
+    assert {"ros_loop.py", "lockstep.py", "vision.py"} <= {p.name for p in benches}
+    offences = {p.name: offending_launch_code(p) for p in benches if p.name != "roslaunch_run.py"}
+    assert {name: found for name, found in offences.items() if found} == {}
+    own = tmp_path / "own_launch.py"  # the check finds a bench with its own launch code
+    own.write_text('import re, subprocess\nsubprocess.Popen(["roslaunch", "-p", "1", "fr5_rl", "x.launch"])\n'
+                   're.search(r"success rate: (\\d+)/(\\d+)", "")\nre.findall(r"failure \\(([^)]*)\\)", "")\n')
+    assert set(offending_launch_code(own)) == {"roslaunch", "success rate: (\\d+)/(\\d+)", "failure \\(([^)]*)\\)"}

@@ -5,10 +5,12 @@ from pathlib import Path
 import pytest
 import yaml
 
-from fr5_rl.config import (ConfigError, DaggerConfig, Hyperparameters, PolicyNodeParams, SimNodeParams,
-                           StaticTransforms, load_typed, load_yaml, typed)
+from fr5_rl.config import ConfigError, load_typed, load_yaml, typed
+from fr5_rl.ros.policy_node import PolicyNodeParams
+from fr5_rl.ros.sim_node import SimNodeParams
 from fr5_rl.training.algorithms import check_hyperparameters, load_hyperparameters
-from fr5_rl.transforms import load_static_transforms
+from fr5_rl.training.hyperparameters import DaggerConfig, Hyperparameters
+from fr5_rl.transforms import StaticTransforms, load_static_transforms
 
 ROOT = Path(__file__).resolve().parent.parent
 KINDS = [(PolicyNodeParams, "policy_node"), (SimNodeParams, "sim_node"), (StaticTransforms, "static_transforms"),
@@ -82,7 +84,7 @@ def test_static_transforms_loader_gives_matrices():
                                         ("command_delay_s", [0.0, 0.05])])
 def test_period_timing_ranges_are_checked(key, value):
     """A command delay or observation age is a time inside one 20 ms period, low <= high."""
-    from fr5_rl.config import load_env_config
+    from fr5_rl.env_config import load_env_config
 
     with pytest.raises(ConfigError, match=key):
         load_env_config({"randomisation": {key: value}})
@@ -90,11 +92,11 @@ def test_period_timing_ranges_are_checked(key, value):
 
 @pytest.mark.parametrize("value", [-1, 5, 1.5, True, "2"])
 def test_previous_actions_must_be_a_small_whole_number(value):
-    from fr5_rl.config import load_env_config
+    from fr5_rl.env_config import load_env_config
 
     with pytest.raises(ConfigError, match="previous_actions"):
         load_env_config({"observation": {"previous_actions": value}})
-    assert load_env_config({"observation": {"previous_actions": 3}})["observation"]["previous_actions"] == 3
+    assert load_env_config({"observation": {"previous_actions": 3}}).observation.previous_actions == 3
 
 
 def test_whole_multiple():

@@ -7,9 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from fr5_rl.config import ExpertStartSettings
 from fr5_rl.envs import FR5Env
 from fr5_rl.training.curriculum import STATE_FILE, ExpertStartCurriculum, ExpertStartWrapper
+from fr5_rl.training.hyperparameters import ExpertStartSettings
+
+pytestmark = pytest.mark.slow  # training with expert starts: `make test`, not `make test-fast`
 
 
 @pytest.fixture(scope="module")

@@ -5,15 +5,16 @@ import math
 import numpy as np
 import pytest
 
-from fr5_rl.config import load_env_config, load_robot_spec
-from fr5_rl.runtime.bundle import ModelFilesError
-from fr5_rl.runtime.deployment import Command, DeploymentStep, Hold, HoldReason, SafetyGate, StepInputs
-from fr5_rl.runtime.joint_state import ArmJointState, JointStateReader, Reading
-from fr5_rl.runtime.policy import Policy
+from fr5_rl.config import load_robot_spec
+from fr5_rl.env_config import load_env_config
+from fr5_rl.deploy.bundle import ModelFilesError
+from fr5_rl.deploy.deployment import Command, DeploymentStep, Hold, HoldReason, SafetyGate, StepInputs
+from fr5_rl.deploy.joint_state import ArmJointState, JointStateReader, Reading
+from fr5_rl.deploy.policy import Policy
 
 ROBOT = load_robot_spec()
 ENV_CFG = load_env_config()
-DT = float(ENV_CFG["simulation"]["control_dt"])
+DT = ENV_CFG.simulation.control_dt
 NOW = 100.0
 TARGET = (-0.5, 0.1, 0.03)  # m, base_link: on the table in front of the arm
 
@@ -123,7 +124,7 @@ def test_observation_matches_the_environment_builder():
     step = make_step()
     step(inputs())
     position, rotation = ForwardKinematics(ROBOT).tcp_pose(ROBOT.home_joint_positions)
-    expected = ObservationBuilder(ROBOT, ENV_CFG["observation"], False).build_from(
+    expected = ObservationBuilder(ROBOT, ENV_CFG.observation, False).build_from(
         ROBOT.home_joint_positions, np.zeros(6), 0.08, ROBOT.max_opening_width, position, rotation[:, 2], TARGET)
     np.testing.assert_allclose(step.policy.seen[0], expected, atol=1e-7)
 
@@ -171,7 +172,7 @@ def test_targets_that_must_not_drive_the_arm(target, expected):
 
 
 def test_fresh_stamp_and_edge_of_workspace_are_accepted():
-    edge = (float(ENV_CFG["workspace"]["low"][0]) - 0.04, 0.0, 0.03)  # within the 5 cm margin
+    edge = (ENV_CFG.workspace.low[0] - 0.04, 0.0, 0.03)  # within the 5 cm margin
     for target in (Reading(TARGET, NOW, stamp=4999.99), Reading(edge, NOW, stamp=5000.0)):
         assert isinstance(make_step()(StepInputs(NOW, joint_reading(), target, stamp_now=5000.0)), Command)
 
@@ -250,7 +251,7 @@ def test_velocities_are_estimated_per_joint_when_left_out():
 
 
 # ----------------------------------------------------------------------------- the safety zone
-from fr5_rl.runtime.deployment import SafetyZone, segment_distance  # noqa: E402
+from fr5_rl.deploy.deployment import SafetyZone, segment_distance  # noqa: E402
 
 ZONE = SafetyZone(ROBOT, ENV_CFG)
 # Configurations where the gripper is inside the forearm (found by sampling the joint limits).
@@ -302,7 +303,7 @@ def test_zone_agrees_with_the_simulator_geometry():
 @pytest.mark.parametrize("task", ["reach", "grasp"])
 def test_zone_never_stops_the_expert(task):
     """No false alarm: along successful expert episodes every configuration is inside the zone
-    (the shipped policies were checked the same way over 40 episodes each, README)."""
+    (the shipped policies were checked the same way over 40 episodes each, docs/benchmarks.md)."""
     from fr5_rl.envs import FR5Env
     from fr5_rl.expert import ScriptedExpert
 

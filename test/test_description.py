@@ -92,10 +92,12 @@ def rotation_angle(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def pybullet_urdf(directory: Path) -> Path:
-    """A copy of urdf/fr5.urdf that PyBullet can load: package:// URIs made absolute."""
-    text = URDF.read_text(encoding="utf-8").replace("package://fr5_rl/", str(REPO) + "/")
+    """The copy of urdf/fr5.urdf that the simulator loads (package:// URIs made absolute, the
+    massless world root left out), copied into ``directory``."""
+    from fr5_rl.sim.robot import urdf_for_pybullet
+
     path = directory / "fr5_pybullet.urdf"
-    path.write_text(text, encoding="utf-8")
+    shutil.copyfile(urdf_for_pybullet(URDF), path)
     return path
 
 
@@ -262,11 +264,33 @@ def test_pybullet_joints_and_masses(robot: Robot, urdf_copy: Path) -> None:
         free.close()
 
 
+def test_the_root_is_massless_for_kdl_and_pybullet_loads_base_link_as_its_base(
+        xml_root: ET.Element, urdf_copy: Path) -> None:
+    """robot_state_publisher (KDL) warns at every launch about a root link with inertia: the
+    root is a massless ``world`` fixed to base_link, as in the vendor's URDF. The simulator's
+    copy leaves it out, so its fixed base is base_link with the FR5's base mass."""
+    children = {j.find("child").get("link") for j in xml_root.findall("joint")}
+    roots = [link for link in xml_root.findall("link") if link.get("name") not in children]
+    assert [root.get("name") for root in roots] == ["world"]
+    assert roots[0].find("inertial") is None
+    world_joint = [j for j in xml_root.findall("joint") if j.find("parent").get("link") == "world"]
+    assert len(world_joint) == 1 and world_joint[0].get("type") == "fixed"
+    assert world_joint[0].find("child").get("link") == "base_link"
+    copy = ET.parse(urdf_copy).getroot()
+    assert {link.get("name") for link in copy.findall("link")} == \
+        {link.get("name") for link in xml_root.findall("link")} - {"world"}
+    robot = Robot(urdf_copy)
+    try:
+        assert p.getBodyInfo(robot.body, physicsClientId=robot.cid)[0].decode() == "base_link"
+    finally:
+        robot.close()
+
+
 def test_inertias_are_physical(xml_root: ET.Element) -> None:
     seen = 0
     for link in xml_root.findall("link"):
         inertial = link.find("inertial")
-        if link.get("name") == "tcp":
+        if link.get("name") in ("tcp", "world"):
             continue
         assert inertial is not None, link.get("name")
         a = {k: float(v) for k, v in inertial.find("inertia").attrib.items()}

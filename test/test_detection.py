@@ -1,21 +1,28 @@
 """The detector's algorithm and its input checks, on synthetic depth images (no ROS, no pybullet).
 
 The scene: a camera 1 m above the table looking straight down; boxes are drawn as the depth of
-their top faces (what such a camera sees of them)."""
+their top faces (what such a camera sees of them). Settings: config/detector.yaml's."""
+import dataclasses
+
 import numpy as np
 import pytest
 
-from fr5_rl.runtime.detection import (Detection, DetectorSettings, InputError, ObjectDetector, ObjectTracker, Refusal,
-                                      RefusalReason, TrackedObject, TrackerSettings, TrackState, check_frame,
-                                      decode_color, decode_depth, draw_detection, footprint_view,
-                                      intrinsics_from_camera_info, label_components)
-from fr5_rl.runtime.pinhole import Intrinsics
+from fr5_rl.config import ConfigError
+from fr5_rl.perception.camera_model import Intrinsics
+from fr5_rl.perception.detector import (Detection, DetectorSettings, ObjectDetector, Refusal, RefusalReason,
+                                        TableRegion)
+from fr5_rl.perception.images import (InputError, check_frame, decode_color, decode_depth,
+                                      intrinsics_from_camera_info)
+from fr5_rl.perception.morphology import label_components
+from fr5_rl.perception.overlay import draw_detection
+from fr5_rl.perception.tracker import ObjectTracker, TrackedObject, TrackerSettings, TrackState, footprint_view
 from fr5_rl.transforms import matrix_from_xyz_rpy
 
 K = Intrinsics(640, 480, 615.0, 615.0, 322.0, 238.0)
 # Optical frame 1 m above the table origin, z down, x along table +x, y along table -y.
 TABLE_FROM_OPTICAL = matrix_from_xyz_rpy([0.0, 0.0, 1.0], [np.pi, 0.0, 0.0])
-SETTINGS = DetectorSettings(region_low=(-0.3, -0.3), region_high=(0.3, 0.3))
+SETTINGS = DetectorSettings.from_yaml()
+TABLE = TableRegion(region_low=(-0.3, -0.3), region_high=(0.3, 0.3), table_height=0.0)
 
 
 def scene(*boxes):
@@ -32,7 +39,7 @@ def scene(*boxes):
 
 
 def detect(depth, settings=SETTINGS):
-    return ObjectDetector(settings).detect(depth, K, TABLE_FROM_OPTICAL)
+    return ObjectDetector(settings, TABLE).detect(depth, K, TABLE_FROM_OPTICAL)
 
 
 def test_one_object_gives_its_centre():
@@ -47,7 +54,7 @@ def test_one_object_gives_its_centre():
 
 def test_known_object_height_places_the_centre_below_the_top():
     lifted = scene((0.0, 0.0, 0.025, 0.025, 0.08))  # top 8 cm up: a 6 cm object lifted 2 cm
-    found = detect(lifted, DetectorSettings(region_low=(-0.3, -0.3), region_high=(0.3, 0.3), object_height=0.06))
+    found = detect(lifted, dataclasses.replace(SETTINGS, object_height=0.06))
     assert found.position_table[2] == pytest.approx(0.05, abs=1e-3)
 
 
@@ -97,7 +104,8 @@ class Frames:
     """Feeds synthetic frames to a detector and a tracker, one stamp after the other."""
 
     def __init__(self, **settings):
-        self.tracker = ObjectTracker(TrackerSettings(**settings), SETTINGS)
+        """:param settings: config/detector.yaml's tracker settings to change."""
+        self.tracker = ObjectTracker(dataclasses.replace(TrackerSettings.from_yaml(), **settings), SETTINGS, TABLE)
         self.stamp = 0.0
 
     def __call__(self, depth, tcp=None, width=None, dt=0.1):
@@ -204,7 +212,7 @@ def test_finger_tips_beside_a_tracked_object_are_not_another_one():
     # A second object like it is not a tip: which is which cannot be told, the track goes.
     twin = frames(scene(OBJECT, (-0.1, 0.1, 0.025, 0.025, 0.06), *tips))
     assert isinstance(twin, Refusal) and twin.reason is RefusalReason.SEVERAL_OBJECTS
-    assert frames.tracker.state is None
+    assert frames.tracker.state is TrackState.LOST
 
 
 def test_bad_frames_leave_the_track_alone():
@@ -253,6 +261,24 @@ def test_an_object_that_slipped_out_of_closed_fingers_is_not_followed():
     assert isinstance(slipped, Refusal) and "not in the hand" in slipped.detail
 
 
+def test_the_tracker_says_its_state():
+    frames = Frames()
+    assert frames.tracker.state is TrackState.LOST
+    seen = frames(scene(OBJECT))
+    assert frames.tracker.state is TrackState.SEEN
+    centre, size = np.array(seen.position_table), seen.detection.size
+    tcp = tcp_at(*(centre + [0.0, 0.0, 0.01]))
+    frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=tcp, width=0.08)
+    assert frames.tracker.state is TrackState.HIDDEN
+    for _ in range(2):
+        frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=tcp, width=size)
+    assert frames.tracker.state is TrackState.IN_HAND
+    frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=tcp, width=0.08)  # let go
+    assert frames.tracker.state is TrackState.HIDDEN
+    frames(scene())  # gone
+    assert frames.tracker.state is TrackState.LOST
+
+
 def test_fingers_closed_on_nothing_or_far_away_hold_nothing():
     frames = Frames()
     seen = frames(scene(OBJECT))
@@ -266,7 +292,8 @@ def test_fingers_closed_on_nothing_or_far_away_hold_nothing():
 
 def test_footprint_view_tells_in_front_from_bare_table():
     found = detect(scene(OBJECT))
-    args = (K, TABLE_FROM_OPTICAL, SETTINGS, found.position_table, found.top_height, found.size, 0.01)
+    args = (K, TABLE_FROM_OPTICAL, TABLE.table_height, SETTINGS.min_height, found.position_table, found.top_height,
+            found.size, 0.01)
     assert footprint_view(scene(OBJECT), *args)[:2] == (0.0, 0.0)
     assert footprint_view(scene(OBJECT, GRIPPER_OVER_IT), *args)[:2] == (1.0, 0.0)
     assert footprint_view(scene(), *args)[:2] == (0.0, 1.0)
@@ -279,6 +306,21 @@ def test_debug_image_colours_say_where_the_position_comes_from():
     hidden = frames(scene(OBJECT, GRIPPER_OVER_IT))
     drawn = draw_detection(color, hidden, K, TABLE_FROM_OPTICAL)
     assert (drawn.reshape(-1, 3) == (255, 220, 0)).all(axis=1).any()
+
+
+# ----------------------------------------------------------------------------- settings
+def test_settings_come_from_the_yaml_sections_only(tmp_path):
+    assert SETTINGS.min_height > 0 and TrackerSettings.from_yaml().hidden_timeout > 0
+    path = tmp_path / "detector.yaml"
+    path.write_text("detector: {min_height: 0.01}\ntracker: {}\n")
+    with pytest.raises(ConfigError, match="missing key 'detector.region_margin'"):
+        DetectorSettings.from_yaml(path)
+    path.write_text("detector:\n" + "".join(f"  {f.name}: {getattr(SETTINGS, f.name)}\n"
+                                             for f in dataclasses.fields(SETTINGS)) + "  min_heigth: 0.01\n")
+    with pytest.raises(ConfigError, match="unknown key 'detector.min_heigth'"):
+        DetectorSettings.from_yaml(path)
+    with pytest.raises(ConfigError, match="must be a mapping"):
+        TrackerSettings.from_yaml(path)  # no tracker section
 
 
 # ----------------------------------------------------------------------------- components
@@ -376,3 +418,75 @@ def test_bad_frames_are_refused(kwargs, reason):
     refusal = frame_check(**kwargs)
     assert isinstance(refusal, Refusal) and refusal.reason is reason
     assert str(refusal).startswith(reason.value)
+
+
+def _old_widths(messages, finger_names):
+    """The detector's opening by stamp before it merged topics: each message with every finger
+    joint gives (its stamp, the sum of its finger positions); the reference for one topic."""
+    widths = []
+    for names, positions, _velocities, stamp in messages:
+        try:
+            width = sum(positions[names.index(name)] for name in finger_names)
+        except (ValueError, IndexError):
+            continue
+        widths.append((stamp, float(width)))
+    return widths
+
+
+def test_finger_widths_from_one_topic_are_as_before():
+    """One topic with every joint (the simulator's /joint_states): the same (stamp, opening)
+    pairs, bit for bit, as the single-topic detector kept."""
+    from fr5_rl.config import load_robot_spec
+    from fr5_rl.ros.detector_node import FingerWidths
+
+    spec = load_robot_spec()
+    names = list(spec.finger_joint_names) + list(spec.joint_names)  # any order: by name
+    rng = np.random.default_rng(3)
+    messages = [(names, tuple(float(v) for v in rng.uniform(0.0, 0.04, len(names))),
+                 tuple(float(v) for v in rng.normal(size=len(names))), 100.0 + 0.005 * i) for i in range(50)]
+    widths = FingerWidths(spec.finger_joint_names, 400)
+    for i, message in enumerate(messages):
+        widths.add(*message, received=float(i))
+    assert list(widths.widths) == _old_widths(messages, spec.finger_joint_names)
+    assert widths.at(100.0 + 0.005 * 7 + 0.001) == _old_widths(messages, spec.finger_joint_names)[7][1]
+    assert widths.at(200.0) is None
+
+
+def test_finger_widths_merge_the_arm_and_gripper_topics_by_name():
+    """The vendor chain: j1..j6 on /frrobot/joint_states, the fingers on the gripper bridge's
+    topic. The arm's messages add nothing, the gripper's add the opening with their stamp; a
+    gripper message with NaN is refused, and the opening is unknown until every finger is heard."""
+    from fr5_rl.config import load_robot_spec
+    from fr5_rl.ros.detector_node import FingerWidths
+
+    spec = load_robot_spec()
+    left, right = spec.finger_joint_names
+    widths = FingerWidths(spec.finger_joint_names, 400)
+    arm = list(spec.joint_names)
+    widths.add(arm, [0.0] * 6, [0.0] * 6, 10.0, 1.0)
+    widths.add([left], [0.01], [], 10.01, 1.01)
+    assert widths.at(10.0) is None  # the other finger not heard of yet
+    widths.add([right, left], [0.015, 0.02], [], 10.02, 1.02)
+    widths.add(arm, [0.1] * 6, [0.0] * 6, 10.03, 1.03)
+    assert list(widths.widths) == [(10.02, 0.02 + 0.015)]
+    widths.add([left], [0.005], [], 10.04, 1.04)  # one finger: merged with the other's last value
+    assert list(widths.widths)[-1] == (10.02, 0.005 + 0.015)  # stamped with the older finger's
+    widths.add([left, right], [float("nan"), 0.0], [], 10.05, 1.05)
+    widths.add([left], [0.001], [], 10.06, 1.06)  # held until a good message brings both fingers
+    assert len(widths.widths) == 2
+    widths.add([left, right], [0.001, 0.002], [], 10.07, 1.07)
+    assert list(widths.widths)[-1] == (10.07, 0.001 + 0.002)
+    assert widths.at(10.03) == pytest.approx(0.02)  # of two at 10.02, the newer
+
+
+def test_detector_takes_a_list_of_joint_state_topics():
+    from fr5_rl.config import load_yaml, typed
+    from fr5_rl.ros.detector_node import DetectorNodeParams
+
+    values = load_yaml("detector")
+    assert typed(DetectorNodeParams, values, "detector.yaml").joint_states_topics == ["/joint_states"]
+    vendor = ["/frrobot/joint_states", "/fr5/gripper/joint_states"]
+    assert typed(DetectorNodeParams, {**values, "joint_states_topics": vendor}, "x").joint_states_topics == vendor
+    for bad in ([], ["/a", "/a"]):
+        with pytest.raises(ConfigError, match="joint_states_topics"):
+            typed(DetectorNodeParams, {**values, "joint_states_topics": bad}, "x")

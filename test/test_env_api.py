@@ -15,8 +15,6 @@ import numpy as np
 import pybullet as p
 import pytest
 
-import fr5_rl.envs
-from fr5_rl.config import object_rest_z
 from fr5_rl.envs import EpisodeVerdict, FR5Env
 from fr5_rl.expert import ScriptedExpert
 
@@ -255,10 +253,10 @@ def test_scene_describes_table_and_object_as_placed():
         scene = env.scene()
         cfg = env.cfg
         assert scene.frame_id == "base_link"
-        assert scene.table_size == tuple(cfg["table"]["size"])
-        assert scene.table_center == (-0.55, 0.0, cfg["table"]["top_height"] - cfg["table"]["size"][2] / 2.0)
-        assert scene.table_top_height == cfg["table"]["top_height"]
-        assert scene.object_shape == "box" and scene.object_dims == (cfg["object"]["half_extent"],)
+        assert scene.table_size == tuple(cfg.table.size)
+        assert scene.table_center == (-0.55, 0.0, cfg.table.top_height - cfg.table.size[2] / 2.0)
+        assert scene.table_top_height == cfg.table.top_height
+        assert scene.object_shape == "box" and scene.object_dims == (cfg.object.half_extent,)
         assert scene.object_size == (0.045, 0.045, 0.045)
         assert scene.object_rest_z == env.object_rest_z == pytest.approx(0.0225)
     finally:
@@ -277,17 +275,20 @@ def test_scene_describes_table_and_object_as_placed():
         env.close()
 
 
-def test_reset_takes_the_rest_height_from_config_object_rest_z(monkeypatch):
-    """_apply_randomisation gets the rest height from fr5_rl.config.object_rest_z: a spy that
+def test_reset_takes_the_rest_height_from_env_config_object_rest_z(monkeypatch):
+    """_apply_randomisation gets the rest height from EnvConfig.object_rest_z: a spy that
     shifts its answer by 1 mm shows up in the placement, the observation's reference and the scene."""
+    from fr5_rl.env_config import EnvConfig
+
     calls = []
+    object_rest_z = EnvConfig.object_rest_z
 
     def spy(cfg, size_scale=1.0):
         calls.append((cfg, size_scale))
         return object_rest_z(cfg, size_scale) + 0.001
 
-    monkeypatch.setattr(fr5_rl.envs, "object_rest_z", spy)
     env = FR5Env(task="grasp", config={"randomisation": {"enabled": True}})
+    monkeypatch.setattr(EnvConfig, "object_rest_z", spy)
     try:
         _, info = env.reset(seed=7)
         assert len(calls) == 1 and calls[0][0] is env.cfg

@@ -5,9 +5,12 @@ import json
 
 import numpy as np
 
-from fr5_rl.runtime.policy import load_policy
+from fr5_rl.deploy.policy import load_policy
 from fr5_rl.cli import imitate
 from fr5_rl.training import imitation, onnx_export
+import pytest
+
+pytestmark = pytest.mark.slow  # DAgger runs: `make test`, not `make test-fast`
 
 
 def test_tiny_dagger_run_gives_a_loadable_model(tmp_path):
@@ -38,5 +41,5 @@ def test_fit_reduces_the_imitation_loss(tmp_path):
     last = imitation.fit(model, normaliser, observations, labels, epochs=15)
     assert last < 0.5 * first
     learner = imitation.make_learner(model, normaliser)
-    error = np.mean([np.abs(learner(o) - l).mean() for o, l in zip(observations[:100], labels[:100])])
+    error = np.mean([np.abs(learner(o) - y).mean() for o, y in zip(observations[:100], labels[:100])])
     assert error < 0.2

@@ -1,5 +1,5 @@
-"""The package's layers run one way: ros -> runtime -> sim/tasks/shared -> config, and the
-training side builds on the runtime, never the other way. Checked on the import graph that the
+"""The package's layers run one way: ros -> deploy/perception/drivers/sim -> shared -> config,
+and the training side builds on deploy, never the other way. Checked on the import graph that the
 source itself declares (every `import` and `from ... import`, at any depth of a function)."""
 import ast
 from pathlib import Path
@@ -32,7 +32,7 @@ def imports_of(path: Path) -> Set[str]:
             else:
                 target = node.module or ""
             found.add(target)
-            # `from . import x` / `from ..runtime import bundle` name submodules.
+            # `from . import x` / `from ..deploy import bundle` name submodules.
             found.update(f"{target}.{alias.name}" for alias in node.names)
     modules = {module_name(p) for p in PACKAGE.rglob("*.py")}
     return {module for module in found if module in modules and module != name}
@@ -51,17 +51,19 @@ GRAPH = import_graph()
 # Which layers each layer may import. Anything not listed (config, kinematics, observation,
 # control, transforms: the shared layer) imports only the shared layer.
 ALLOWED = {
-    "ros": {"ros", "runtime", "shared", "envs", "sim", "tasks"},
-    "cli": {"training", "runtime", "shared", "envs", "expert", "sim", "tasks", "cli"},
-    "training": {"training", "runtime", "shared", "envs", "expert", "sim", "tasks"},
-    "runtime": {"runtime", "shared"},
+    "ros": {"ros", "deploy", "perception", "drivers", "shared", "envs", "sim", "tasks"},
+    "cli": {"training", "deploy", "shared", "envs", "expert", "sim", "tasks", "cli"},
+    "training": {"training", "deploy", "shared", "envs", "expert", "sim", "tasks"},
+    "deploy": {"deploy", "shared"},
+    "perception": {"perception", "shared"},
+    "drivers": {"drivers", "shared"},
     "envs": {"shared", "sim", "tasks"},
     "expert": {"shared", "envs", "sim", "tasks"},
     "sim": {"shared", "sim"},
     "tasks": {"shared", "tasks"},
     "shared": {"shared"},
 }
-SHARED = {"config", "kinematics", "observation", "control", "transforms", "fr5_rl"}
+SHARED = {"config", "env_config", "kinematics", "observation", "control", "transforms", "fr5_rl"}
 
 
 def kind(module: str) -> str:
@@ -75,9 +77,9 @@ def test_imports_run_down_the_layers(module):
     assert not wrong, f"{module} ({kind(module)}) imports {wrong}, which its layer must not depend on"
 
 
-def test_nothing_at_runtime_or_under_ros_imports_training():
+def test_nothing_deployed_imports_training():
     for module, targets in GRAPH.items():
-        if kind(module) in ("ros", "runtime"):
+        if kind(module) in ("ros", "deploy", "perception", "drivers"):
             assert not any(kind(t) in ("training", "cli") for t in targets), (module, targets)
 
 
@@ -102,8 +104,8 @@ def test_the_import_graph_has_no_cycle():
 
 def test_the_checker_sees_relative_and_nested_imports():
     """The graph is built right: known edges of the source appear in it."""
-    assert "fr5_rl.runtime.bundle" in GRAPH["fr5_rl.runtime.policy"]
-    assert "fr5_rl.runtime.deployment" in GRAPH["fr5_rl.ros.policy_node"]
+    assert "fr5_rl.deploy.bundle" in GRAPH["fr5_rl.deploy.policy"]
+    assert "fr5_rl.deploy.deployment" in GRAPH["fr5_rl.ros.policy_node"]
     assert "fr5_rl.training.train" in GRAPH["fr5_rl.cli.train"]  # imported inside main()
 
 

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fr5_rl.runtime.bundle import ModelFilesError
-from fr5_rl.runtime.policy import load_policy
+from fr5_rl.deploy.bundle import ModelFilesError
+from fr5_rl.deploy.policy import load_policy
 
 ROOT = Path(__file__).resolve().parent.parent
 REACH, GRASP = ROOT / "models" / "reach", ROOT / "models" / "grasp"
@@ -95,6 +95,7 @@ def run_script(script: str, *args: str) -> subprocess.CompletedProcess:
                           stdin=subprocess.DEVNULL, timeout=180, cwd=ROOT)
 
 
+@pytest.mark.slow  # each runs a command line in a new interpreter
 @pytest.mark.parametrize("script, damage, file", [
     ("evaluate.py", lambda m: truncate(m / "model.zip"), "model.zip"),
     ("evaluate.py", lambda m: garbage(m / "vecnormalize.pkl"), "vecnormalize.pkl"),
@@ -137,7 +138,7 @@ def hook(event, args):
         unpickled.append(args)
 sys.addaudithook(hook)
 import numpy as np
-from fr5_rl.runtime.policy import load_policy
+from fr5_rl.deploy.policy import load_policy
 policy = load_policy({str(model)!r}, "onnx")
 action = policy.act(np.zeros(23, dtype=np.float32))
 assert action.shape == (7,)
@@ -161,6 +162,7 @@ def free_port() -> int:
         return sock.getsockname()[1]
 
 
+@pytest.mark.slow  # starts a roscore and the node
 def test_policy_node_logs_fatal_and_exits_nonzero(tmp_path):
     """A real roscore; the node is started as a user would, on a damaged model."""
     model = copy_model(tmp_path)
@@ -186,7 +188,7 @@ def test_a_ctrl_c_during_a_save_takes_effect_once_the_save_is_done():
     trainer crashed instead of saving and exiting 130): the interrupt now waits for the block."""
     import signal
 
-    from fr5_rl.runtime.bundle import interrupts_deferred
+    from fr5_rl.deploy.bundle import interrupts_deferred
 
     finished = []
     outer = signal.signal(signal.SIGINT, signal.default_int_handler)  # a terminal's Python process

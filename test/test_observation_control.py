@@ -7,10 +7,13 @@ control.py, so a change of index, scale or clamping shows up as a failure.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from fr5_rl.config import load_env_config, load_robot_spec
+from fr5_rl.config import load_robot_spec, typed
+from fr5_rl.env_config import JointStepHintConfig, ObservationConfig, load_env_config
 from fr5_rl.control import ACTION_SIZE, JointCommandShaper
 from fr5_rl.observation import (
     GRASP_OBSERVATION_SIZE,
@@ -21,12 +24,12 @@ from fr5_rl.observation import (
 
 SPEC = load_robot_spec()
 CFG = load_env_config()
-CONTROL_DT = float(CFG["simulation"]["control_dt"])
+CONTROL_DT = CFG.simulation.control_dt
 MAX_WIDTH = SPEC.max_opening_width
-REL_SCALE = float(CFG["observation"]["relative_position_scale"])
-LIFT_SCALE = float(CFG["observation"]["lift_scale"])
-TCP_LOW = np.asarray(CFG["observation"]["tcp_position_low"], dtype=float)
-TCP_HIGH = np.asarray(CFG["observation"]["tcp_position_high"], dtype=float)
+REL_SCALE = CFG.observation.relative_position_scale
+LIFT_SCALE = CFG.observation.lift_scale
+TCP_LOW = np.asarray(CFG.observation.tcp_position_low, dtype=float)
+TCP_HIGH = np.asarray(CFG.observation.tcp_position_high, dtype=float)
 DOWN = np.diag([1.0, -1.0, -1.0])  # tcp z axis pointing straight down
 
 
@@ -48,12 +51,12 @@ def inputs(**changes) -> ObservationInputs:
 
 @pytest.fixture
 def reach_builder():
-    return ObservationBuilder(SPEC, CFG["observation"], include_lift=False)
+    return ObservationBuilder(SPEC, CFG.observation, include_lift=False)
 
 
 @pytest.fixture
 def grasp_builder():
-    return ObservationBuilder(SPEC, CFG["observation"], include_lift=True)
+    return ObservationBuilder(SPEC, CFG.observation, include_lift=True)
 
 
 # ----------------------------------------------------------------------------- observation
@@ -187,11 +190,11 @@ def test_out_buffer_is_used(reach_builder):
 
 # ----------------------------------------------------------------------------- control
 def shaper(max_joint_step=None, alpha=None) -> JointCommandShaper:
-    cfg = dict(CFG["action"])
+    cfg = CFG.action
     if max_joint_step is not None:
-        cfg["max_joint_step"] = max_joint_step
+        cfg = dataclasses.replace(cfg, max_joint_step=max_joint_step)
     if alpha is not None:
-        cfg["smoothing_alpha"] = alpha
+        cfg = dataclasses.replace(cfg, smoothing_alpha=alpha)
     return JointCommandShaper(SPEC, cfg, CONTROL_DT)
 
 
@@ -231,14 +234,14 @@ def test_low_pass_filter_sequence_and_reset():
 
 def test_alpha_one_means_no_filter():
     s = shaper(alpha=1.0)
-    max_step = float(CFG["action"]["max_joint_step"])
+    max_step = CFG.action.max_joint_step
     s.arm_targets(action(np.ones(6)), MID)
     np.testing.assert_allclose(s.arm_targets(action(-np.ones(6)), MID) - MID, -max_step, atol=1e-12)
 
 
 def test_increments_apply_to_measured_position():
     s = shaper(alpha=1.0)
-    max_step = float(CFG["action"]["max_joint_step"])
+    max_step = CFG.action.max_joint_step
     measured = MID + np.array([0.1, -0.2, 0.3, 0.0, 0.05, -0.05])
     np.testing.assert_allclose(s.arm_targets(action(np.ones(6) * 0.5), measured),
                                measured + 0.5 * max_step, atol=1e-12)
@@ -256,7 +259,7 @@ def test_clamped_at_joint_limits():
 
 
 def test_actions_beyond_one_are_clipped():
-    max_step = float(CFG["action"]["max_joint_step"])
+    max_step = CFG.action.max_joint_step
     a, b = shaper(alpha=1.0), shaper(alpha=1.0)
     np.testing.assert_array_equal(a.arm_targets(action(10 * np.array([1, -1, 1, -1, 1, -1])), MID),
                                   b.arm_targets(action(np.array([1, -1, 1, -1, 1, -1])), MID))
@@ -320,14 +323,14 @@ def test_gripper_width_mapping():
 
 # ----------------------------------------------------------------------------- previous actions
 def history_builder(count: int, include_lift: bool = True) -> ObservationBuilder:
-    return ObservationBuilder(SPEC, {**CFG["observation"], "previous_actions": count}, include_lift=include_lift)
+    return ObservationBuilder(SPEC, dataclasses.replace(CFG.observation, previous_actions=count), include_lift=include_lift)
 
 
 def test_previous_actions_come_last_newest_first_and_clipped():
     from fr5_rl.observation import ActionHistory, observation_size
 
     builder = history_builder(2)
-    assert builder.size == GRASP_OBSERVATION_SIZE + 12 == observation_size("grasp", {"previous_actions": 2})
+    assert builder.size == GRASP_OBSERVATION_SIZE + 12 == observation_size("grasp", dataclasses.replace(CFG.observation, previous_actions=2))
     history = ActionHistory(2)
     assert history.values() == [0.0] * 12  # an episode starts at rest
     history.push([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, -1.0])  # the gripper value is not kept
@@ -367,7 +370,8 @@ BENT = np.array([0.3, -1.2, 1.6, -2.0, -1.5, 0.2])
 
 
 def hint_builder(include_lift: bool = False, **changes) -> ObservationBuilder:
-    return ObservationBuilder(SPEC, {**CFG["observation"], "joint_step_hint": {**HINT, **changes}}, include_lift)
+    return ObservationBuilder(SPEC, dataclasses.replace(CFG.observation, joint_step_hint=JointStepHintConfig(**{**HINT, **changes})),
+                              include_lift)
 
 
 def test_tcp_jacobian_matches_finite_differences_of_the_tcp_pose():
@@ -394,10 +398,10 @@ def test_the_hint_comes_last_and_the_rest_is_unchanged():
 
     for include_lift, task, base in ((False, "reach", REACH_OBSERVATION_SIZE), (True, "grasp", GRASP_OBSERVATION_SIZE)):
         builder = hint_builder(include_lift)
-        assert builder.size == base + 6 == observation_size(task, {"joint_step_hint": HINT})
+        assert builder.size == base + 6 == observation_size(task, dataclasses.replace(CFG.observation, joint_step_hint=JointStepHintConfig(**HINT)))
         state = inputs(joint_positions=BENT, object_position=np.array([-0.5, 0.1, 0.03]))
         observation = builder.build(state)
-        np.testing.assert_allclose(observation[:base], ObservationBuilder(SPEC, CFG["observation"], include_lift).build(state))
+        np.testing.assert_allclose(observation[:base], ObservationBuilder(SPEC, CFG.observation, include_lift).build(state))
         np.testing.assert_allclose(observation[base:], builder.joint_step_hint(BENT, [-0.5, 0.1, 0.03]), atol=1e-7)
         assert np.all(np.abs(observation[base:]) <= 1.0)
 
@@ -453,6 +457,9 @@ def test_a_malformed_hint_setting_is_refused(bad):
 def test_a_model_from_before_the_hint_is_read_as_having_none():
     from fr5_rl.observation import observation_size, saved_observation_settings
 
-    old = {key: value for key, value in CFG["observation"].items() if key not in ("previous_actions", "joint_step_hint")}
-    assert saved_observation_settings(old) == {**old, "previous_actions": 0, "joint_step_hint": None}
-    assert observation_size("reach", old) == REACH_OBSERVATION_SIZE
+    old = {key: value for key, value in CFG.to_dict()["observation"].items()
+           if key not in ("previous_actions", "joint_step_hint", "joint_velocity_source")}
+    assert saved_observation_settings(old) == {**old, "previous_actions": 0, "joint_step_hint": None,
+                                               "joint_velocity_source": "measured"}
+    saved = typed(ObservationConfig, saved_observation_settings(old), "meta.json")
+    assert observation_size("reach", saved) == REACH_OBSERVATION_SIZE

@@ -12,6 +12,8 @@ import pytest
 from fr5_rl.cli import evaluate
 from fr5_rl.training.ray_eval import seed_slices
 
+pytestmark = pytest.mark.slow  # a two-node Ray cluster: `make test`, not `make test-fast`
+
 MODELS = Path(__file__).resolve().parent.parent / "models"
 # Two slices of 4: the expert's episode of seed 3000004, the first of the second slice, ends
 # 1e-5 m apart in a fresh environment and after seed 3000003 (see fr5_rl.training.ray_eval), so

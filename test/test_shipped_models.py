@@ -5,9 +5,11 @@ from pathlib import Path
 
 import pytest
 
-from fr5_rl.runtime.policy import load_policy
+from fr5_rl.deploy.policy import load_policy
 from fr5_rl.training.evaluation import run_episodes
 from fr5_rl.training.onnx_export import parity
+
+pytestmark = pytest.mark.slow  # every shipped model over many episodes: `make test`, not `make test-fast`
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 # model directory -> (task, episodes, minimum success rate); grasp_rl: PPO from reward alone.

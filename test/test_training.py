@@ -6,150 +6,26 @@ interrupt handling, refusals, numerical parity), not learning quality.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
-import shutil
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from fr5_rl.config import ConfigError, package_root
 from fr5_rl.cli import evaluate, train
 from fr5_rl.training import evaluation
 from fr5_rl.training.algorithms import check_hyperparameters, load_hyperparameters
-from fr5_rl.training.curriculum import STATE_FILE
-from fr5_rl.runtime.bundle import ModelFilesError
+from fr5_rl.training.run_settings import FIXED_ON_RESUME, KEPT_ON_RESUME, TrainRun
+from fr5_rl.deploy.bundle import ModelFilesError
+from training_helpers import (DEFAULT_REACH_SIZE, FAST_PPO, OFF_POLICY, TRAIN_MODULE, TRAIN_SCRIPT, assert_model_dir,
+                              read_json, start_training, wait_for_checkpoint, write)
 
-REPO = Path(__file__).resolve().parent.parent
-TRAIN_SCRIPT = REPO / "scripts" / "train.py"
-# The same entry point as scripts/train.py, but passing main()'s return value to sys.exit.
-TRAIN_MODULE = ["-c", "import sys; from fr5_rl.cli.train import main; sys.exit(main(sys.argv[1:]))"]
-
-FAST_PPO = """\
-n_timesteps: 20000
-n_envs: 2
-normalize: {norm_obs: true, norm_reward: false, clip_obs: 10.0}
-env: {}
-algo_kwargs:
-  policy: MlpPolicy
-  n_steps: 256
-  batch_size: 128
-  n_epochs: 2
-  learning_rate: 0.0003
-  gamma: 0.98
-  policy_kwargs:
-    net_arch: {pi: [32, 32], vf: [32, 32]}
-"""
-
-# The default PPO reach model (the ppo_run fixture) carries the joint-step hint: 23 + 6 values.
-DEFAULT_REACH_SIZE = 29
-# FAST_PPO with the default reach config's observation: a run that can start from ppo_run's model.
-FAST_PPO_WITH_HINT = FAST_PPO.replace(
-    "env: {}", "env: {observation: {joint_step_hint: "
-    "{cartesian_step: 0.015, rotation_step: 0.05, damping: 0.05, joint_step_scale: 0.04}}}")
-
-OFF_POLICY = """\
-n_timesteps: 600
-n_envs: 1
-normalize: {norm_obs: true, norm_reward: false, clip_obs: 10.0}
-env: {}
-algo_kwargs:
-  policy: MlpPolicy
-  learning_rate: 0.001
-  buffer_size: 2000
-  batch_size: 32
-  learning_starts: 100
-  gamma: 0.98
-  train_freq: 4
-  gradient_steps: 1
-  policy_kwargs: {net_arch: [32, 32]}
-"""
-
-
-def write(path: Path, text: str) -> Path:
-    path.write_text(text, encoding="utf-8")
-    return path
-
-
-def read_json(path: Path) -> dict:
-    return json.loads(Path(path).read_text(encoding="utf-8"))
-
-
-def subprocess_env() -> dict:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = f"{REPO / 'src'}{os.pathsep}{env.get('PYTHONPATH', '')}"
-    env["PYTHONUNBUFFERED"] = "1"
-    return env
-
-
-def start_training(command_prefix, run_dir: Path, hyperparams: Path, timesteps: int, extra=(),
-                   new_session=False) -> subprocess.Popen:
-    args = [sys.executable, *command_prefix, "--timesteps", str(timesteps), "--n-envs", "2",
-            "--hyperparams", str(hyperparams), "--checkpoint-freq", "1000", "--eval-freq", "1000000",
-            "--eval-episodes", "1", "--no-progress", "--run-dir", str(run_dir), *extra]
-    return subprocess.Popen(args, cwd=REPO, env=subprocess_env(), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=new_session,
-                            preexec_fn=default_sigint)
-
-
-def default_sigint() -> None:
-    """Children of a background job inherit an ignored SIGINT (and Python then installs no
-    KeyboardInterrupt handler); give the trainer the disposition an interactive user has."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
-def wait_for_checkpoint(proc: subprocess.Popen, run_dir: Path, timeout: float = 45.0) -> int:
-    """Wait until checkpoints/latest is complete; returns its num_timesteps."""
-    meta = run_dir / "checkpoints" / "latest" / "meta.json"
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if meta.is_file():
-            try:
-                return int(read_json(meta)["num_timesteps"])
-            except (OSError, ValueError, KeyError):
-                pass  # being replaced right now
-        if proc.poll() is not None:
-            out, err = proc.communicate()
-            pytest.fail(f"training exited early with {proc.returncode}:\n{out}\n{err}")
-        time.sleep(0.05)
-    proc.kill()
-    out, err = proc.communicate()
-    pytest.fail(f"no checkpoint after {timeout} s:\n{out}\n{err}")
-
-
-def assert_model_dir(directory: Path, task="reach", algo="ppo") -> dict:
-    for name in ("model.zip", "vecnormalize.pkl", "meta.json"):
-        assert (directory / name).is_file() and (directory / name).stat().st_size > 0, name
-    meta = read_json(directory / "meta.json")
-    assert meta["task"] == task and meta["algo"] == algo
-    hint = 6 if meta["env_config"]["observation"].get("joint_step_hint") else 0  # the joint-step hint's block
-    assert meta["observation_size"] == (23 if task == "reach" else 24) + hint and meta["action_size"] == 7
-    return meta
-
-
-# ----------------------------------------------------------------------------- a short PPO run
-@pytest.fixture(scope="module")
-def ppo_run(tmp_path_factory) -> Path:
-    run_dir = tmp_path_factory.mktemp("ppo") / "run"
-    code = train.main(["--timesteps", "3000", "--n-envs", "2", "--no-subprocess", "--checkpoint-freq", "1000",
-                       "--eval-freq", "1000", "--eval-episodes", "2", "--no-progress", "--run-dir", str(run_dir)])
-    assert code == 0
-    return run_dir
-
-
-@pytest.fixture
-def model_copy(ppo_run, tmp_path) -> Path:
-    """A private copy of the run's checkpoint, free to be damaged by the test."""
-    target = tmp_path / "model"
-    shutil.copytree(ppo_run / "checkpoints" / "latest", target)
-    return target
-
+pytestmark = pytest.mark.slow  # short training runs, resumes and Ctrl-C in subprocesses: `make test`, not `make test-fast`
 
 def test_short_ppo_run_writes_checkpoint(ppo_run):
     latest = ppo_run / "checkpoints" / "latest"
@@ -167,7 +43,7 @@ def test_short_ppo_run_writes_checkpoint(ppo_run):
     # no staging directories left behind
     assert not [p.name for p in (ppo_run / "checkpoints").iterdir() if p.name.startswith(".")]
     # The statistics are real running statistics, not the initial ones.
-    from fr5_rl.runtime.policy import load_normalizer
+    from fr5_rl.deploy.policy import load_normalizer
 
     normalizer = load_normalizer(latest)
     assert normalizer.obs_rms.count > 1000
@@ -251,6 +127,57 @@ def test_killed_run_resumes(tmp_path, capsys):
 def test_resume_needs_existing_run(tmp_path, capsys):
     assert train.main(["--resume", "--run-dir", str(tmp_path / "nothing"), "--no-progress"]) == 2
     assert "--resume" in capsys.readouterr().err
+
+
+SAVED_CONFIG = {"task": "grasp", "algo": "tqc", "seed": 7, "n_envs": 3, "timesteps": 9000, "hyperparams_resolved": {},
+                "checkpoint_freq": 500, "eval_freq": 1500, "eval_episodes": 5, "no_subprocess": True,
+                "target_success": 0.8, "eval_min_training_success": 0.25}
+
+
+def test_resume_merge_takes_the_saved_run_but_for_options_typed_again():
+    given = TrainRun(task="reach", algo="ppo", seed=1, n_envs=8, timesteps=100, run_dir=Path("r"), resume=True,
+                     eval_freq=20_000, target_success=0.5, processes=2, progress=False, torch_threads=3)
+    merged = given.resumed(SAVED_CONFIG, typed_again={"task", "seed", "eval_freq", "target_success", "processes"})
+    # what the run is comes from config.json, typed again or not
+    assert (merged.task, merged.algo, merged.seed, merged.n_envs, merged.timesteps) == ("grasp", "tqc", 7, 3, 9000)
+    # typed again: this resumption's values, even one equal to its default (eval_freq 20000)
+    assert (merged.eval_freq, merged.target_success) == (20_000, 0.5)
+    # not typed again: the run's own
+    assert (merged.checkpoint_freq, merged.eval_episodes, merged.subprocess, merged.eval_min_training_success) == \
+        (500, 5, False, 0.25)
+    # never saved: as given
+    assert (merged.processes, merged.progress, merged.torch_threads, merged.run_dir) == (2, False, 3, Path("r"))
+    # nothing typed again (a Ray trial's retry): all of config.json; a config.json without the newer keys
+    older = {key: value for key, value in SAVED_CONFIG.items() if key != "eval_min_training_success"}
+    plain = TrainRun(resume=True, eval_min_training_success=0.5).resumed(older, frozenset())
+    assert (plain.eval_freq, plain.subprocess, plain.eval_min_training_success) == (1500, False, 0.5)
+    # and config.json written back reads the same
+    assert TrainRun().resumed(merged.saved_config({}), set()) == dataclasses.replace(TrainRun(), **{
+        name: getattr(merged, name) for name in FIXED_ON_RESUME + KEPT_ON_RESUME})
+    with pytest.raises(ValueError, match="no_progress"):
+        given.resumed(SAVED_CONFIG, {"no_progress"})  # option names must be TrainRun fields
+
+
+def test_typed_options_are_what_the_command_line_gives():
+    parser = train.build_parser()
+    assert train.typed_options(parser, []) == set()
+    assert train.typed_options(parser, ["--resume", "--run-dir", "r", "--eval-freq", "20000", "--no-subprocess"]) == \
+        {"resume", "run_dir", "eval_freq", "no_subprocess"}
+    assert train.train_run(parser.parse_args([])) == TrainRun()  # the command line's defaults are TrainRun's
+
+
+def test_resumed_run_keeps_its_settings_unless_typed_again(ppo_run, tmp_path, monkeypatch):
+    """train.py --resume hands train() the run's saved settings, and the options typed again."""
+    import fr5_rl.training.train as training
+
+    seen = []
+    monkeypatch.setattr(training, "train", lambda run, t_start=None, extra_callbacks=None: seen.append(run) or 0)
+    common = ["--resume", "--run-dir", str(ppo_run), "--no-progress"]
+    assert train.main([*common, "--n-envs", "5", "--eval-freq", "20000"]) == 0
+    assert train.main(common) == 0
+    typed_again, plain = seen
+    assert typed_again.n_envs == plain.n_envs == 2 and plain.eval_freq == 1000 and typed_again.eval_freq == 20_000
+    assert plain.checkpoint_freq == typed_again.checkpoint_freq == 1000 and plain.eval_episodes == 2
 
 
 # ----------------------------------------------------------------------------- Ctrl-C
@@ -363,7 +290,7 @@ def test_off_policy_batch_larger_than_buffer_refused(tmp_path):
 
 # ----------------------------------------------------------------------------- loading
 def test_missing_statistics_refused(model_copy):
-    from fr5_rl.runtime.policy import load_policy
+    from fr5_rl.deploy.policy import load_policy
 
     (model_copy / "vecnormalize.pkl").unlink()
     with pytest.raises(ModelFilesError, match="statistics"):
@@ -371,7 +298,7 @@ def test_missing_statistics_refused(model_copy):
 
 
 def test_missing_directory_and_model_refused(model_copy, tmp_path):
-    from fr5_rl.runtime.policy import load_policy
+    from fr5_rl.deploy.policy import load_policy
 
     with pytest.raises(ModelFilesError):
         load_policy(tmp_path / "does_not_exist")
@@ -381,7 +308,7 @@ def test_missing_directory_and_model_refused(model_copy, tmp_path):
 
 
 def test_observation_size_mismatch_refused(model_copy):
-    from fr5_rl.runtime.policy import load_policy
+    from fr5_rl.deploy.policy import load_policy
 
     policy = load_policy(model_copy, "torch", expected_task="reach")
     assert policy.act(np.zeros(DEFAULT_REACH_SIZE, dtype=np.float32)).shape == (7,)
@@ -400,7 +327,7 @@ def test_observation_size_mismatch_refused(model_copy):
 
 
 def test_onnx_backend_needs_export_and_checks_size(model_copy):
-    from fr5_rl.runtime.policy import load_policy
+    from fr5_rl.deploy.policy import load_policy
     from fr5_rl.training.onnx_export import export
 
     with pytest.raises(ModelFilesError, match="export_onnx"):
@@ -514,201 +441,3 @@ def test_off_policy_short_run(algo, tmp_path):
     # the exported actor matches SB3 for this algorithm too
     export(latest)
     assert parity(latest, 200) <= 1e-5
-
-
-# ----------------------------------------------------------------------------- --init-from (fine-tuning)
-def test_init_from_continues_the_given_model(ppo_run, tmp_path):
-    """A fine-tuning run starts from the given weights and statistics (not from scratch) and
-    counts its own steps; its meta says where it came from."""
-    import torch
-    from stable_baselines3 import PPO
-
-    source = ppo_run / "checkpoints" / "latest"
-    run_dir = tmp_path / "fine"
-    code = train.main(["--init-from", str(source), "--timesteps", "512", "--n-envs", "2", "--no-subprocess",
-                       "--checkpoint-freq", "256", "--eval-freq", "100000", "--no-progress", "--run-dir", str(run_dir)])
-    assert code == 0
-    meta = read_json(run_dir / "final" / "meta.json")
-    assert meta["initialised_from"]["model"] == str(source) and meta["initialised_from"]["num_timesteps"] >= 3000
-    assert 512 <= meta["num_timesteps"] < 3000  # this run's steps only
-    before = PPO.load(source / "model.zip", device="cpu").policy.state_dict()
-    after = PPO.load(run_dir / "final" / "model.zip", device="cpu").policy.state_dict()
-    moved = [float((after[k] - before[k]).abs().max()) for k in before if before[k].dtype == torch.float32]
-    assert max(moved) > 0.0  # it trained ...
-    assert max(moved) < 0.5  # ... a little, from the source's weights (a fresh init is far away)
-
-
-def test_init_from_applies_this_runs_settings_and_warms_the_critic_up(ppo_run, tmp_path):
-    """--init-from with a hyperparameter file: the file's training settings (learning rate,
-    n_steps, clip range) replace the saved model's; with critic_warmup, the actor's weights stay
-    exactly as they were while only the value function learns, then the actor trains too."""
-    import torch
-    from stable_baselines3 import PPO
-
-    source = ppo_run / "checkpoints" / "latest"
-    hyper = write(tmp_path / "fine.yaml", FAST_PPO_WITH_HINT.replace("n_steps: 256", "n_steps: 128")
-                  .replace("learning_rate: 0.0003", "learning_rate: 0.00002")
-                  + "  clip_range: 0.05\n" + "critic_warmup: {steps: 256, learning_rate: 0.001}\n")
-
-    def fine_tune(timesteps: int) -> dict:
-        run_dir = tmp_path / f"fine_{timesteps}"
-        code = train.main(["--init-from", str(source), "--hyperparams", str(hyper), "--timesteps", str(timesteps),
-                           "--n-envs", "1", "--no-subprocess", "--eval-freq", "100000", "--no-progress",
-                           "--run-dir", str(run_dir)])
-        assert code == 0
-        return PPO.load(run_dir / "final" / "model.zip", device="cpu")
-
-    before = PPO.load(source / "model.zip", device="cpu").policy.state_dict()
-    held = fine_tune(256)  # two rollouts of 128: both inside the warm-up
-    assert (held.learning_rate, held.n_steps, held.clip_range(1.0)) == (0.00002, 128, 0.05)
-    state = held.policy.state_dict()
-    actor = [k for k in before if k.startswith(("mlp_extractor.policy_net", "action_net", "log_std"))]
-    critic = [k for k in before if k.startswith(("mlp_extractor.value_net", "value_net"))]
-    assert actor and critic
-    for key in actor:
-        assert torch.equal(state[key], before[key]), f"{key} moved during the critic warm-up"
-    assert max(float((state[k] - before[k]).abs().max()) for k in critic) > 0.0
-    released = fine_tune(768).policy.state_dict()  # the last rollouts train the actor as well
-    assert max(float((released[k] - before[k]).abs().max()) for k in actor) > 0.0
-
-
-def test_init_from_with_more_previous_actions_starts_from_the_same_policy(ppo_run, tmp_path):
-    """A model trained without previous actions in its observation can start a run that has them:
-    the widened network acts exactly as the source on every observation, whatever the new values
-    hold (their weights start at zero), and the run trains from there. The new block goes where
-    the layout puts it, before the joint-step hint, which keeps its weights."""
-    import gymnasium as gym
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import DummyVecEnv
-
-    import fr5_rl  # noqa: F401
-    from fr5_rl.runtime.policy import load_policy
-    from fr5_rl.training.train import load_widened
-
-    source = ppo_run / "checkpoints" / "latest"
-    hint = yaml.safe_load(FAST_PPO_WITH_HINT)["env"]["observation"]["joint_step_hint"]
-    observation_cfg = {"previous_actions": 2, "joint_step_hint": hint}
-    venv = DummyVecEnv([lambda: gym.make("FR5Reach-v0", config={"observation": observation_cfg})])
-    model, widened = load_widened(source, PPO, venv, [(23, 12)], seed=0)
-    before = load_policy(source, "torch")
-    rng = np.random.default_rng(0)
-    for _ in range(20):
-        observation = rng.uniform(-1, 1, DEFAULT_REACH_SIZE).astype(np.float32)
-        previous = rng.uniform(-1, 1, 12).astype(np.float32)
-        wide = np.concatenate([observation[:23], previous, observation[23:]])
-        action, _ = model.predict(widened.normalize_obs(wide), deterministic=True)
-        np.testing.assert_allclose(np.clip(action, -1, 1), before.act(observation), atol=1e-5)
-    venv.close()
-
-    hyper = write(tmp_path / "wide.yaml", FAST_PPO_WITH_HINT.replace("{observation: {", "{observation: {previous_actions: 2, "))
-    run_dir = tmp_path / "wide"
-    code = train.main(["--init-from", str(source), "--hyperparams", str(hyper), "--timesteps", "256", "--n-envs", "1",
-                       "--no-subprocess", "--eval-freq", "100000", "--no-progress", "--run-dir", str(run_dir)])
-    assert code == 0
-    meta = read_json(run_dir / "final" / "meta.json")
-    assert meta["observation_size"] == DEFAULT_REACH_SIZE + 12 and meta["initialised_from"]["model"] == str(source)
-    assert load_policy(run_dir / "final", "torch").act(np.zeros(DEFAULT_REACH_SIZE + 12)).shape == (7,)
-
-
-def test_critic_warmup_settings_are_checked(tmp_path):
-    with pytest.raises(ConfigError, match="critic_warmup.steps"):
-        load_hyperparameters("ppo", "reach", str(write(tmp_path / "a.yaml", FAST_PPO + "critic_warmup: {steps: 0, learning_rate: 0.001}\n")))
-    with pytest.raises(ConfigError, match="critic_warmup"):
-        load_hyperparameters("ppo", "reach", str(write(tmp_path / "b.yaml", FAST_PPO + "critic_warmup: {steps: 100}\n")))
-
-
-def test_init_from_refuses_another_task(ppo_run, tmp_path, capsys):
-    code = train.main(["--task", "grasp", "--init-from", str(ppo_run / "checkpoints" / "latest"), "--timesteps",
-                       "256", "--n-envs", "2", "--no-subprocess", "--no-progress", "--run-dir", str(tmp_path / "r")])
-    assert code == 2
-    assert "task is 'reach'" in capsys.readouterr().err
-
-
-def test_expert_start_settings_are_checked(tmp_path):
-    for bad, key in (("{max_steps: 0, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 0.1, frontier_share: 0.5}", "max_steps"),
-                     ("{max_steps: 70, first_reach_back: 0.0, promote_at: 0.5, window: 10, step_back: 0.1, frontier_share: 0.5}", "first_reach_back"),
-                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.0, window: 10, step_back: 0.1, frontier_share: 0.5}", "promote_at"),
-                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 1.5, frontier_share: 0.5}", "step_back"),
-                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.5, window: 10, step_back: 0.1, frontier_share: 1.5}", "frontier_share"),
-                     ("{max_steps: 70, first_reach_back: 0.2, promote_at: 0.5, window: 10}", "expert_start")):
-        path = tmp_path / "bad.yaml"
-        write(path, FAST_PPO + f"expert_start: {bad}\n")
-        with pytest.raises(ConfigError, match=key):
-            load_hyperparameters("ppo", "grasp", str(path))
-
-
-def test_train_runs_with_expert_starts(tmp_path):
-    hyperparams = write(tmp_path / "ppo_grasp.yaml", FAST_PPO + "expert_start: {max_steps: 70, first_reach_back: 0.3, "
-                                                                  "promote_at: 0.5, window: 20, step_back: 0.1, "
-                                                                  "frontier_share: 0.5}\n")
-    run_dir = tmp_path / "run"
-    code = train.main(["--task", "grasp", "--hyperparams", str(hyperparams), "--timesteps", "1024", "--no-subprocess",
-                       "--no-progress", "--eval-freq", "512", "--eval-episodes", "1", "--run-dir", str(run_dir)])
-    assert code == 0
-    config = read_json(run_dir / "config.json")
-    assert config["hyperparams_resolved"]["expert_start"]["max_steps"] == 70
-    # The curriculum ran in the training loop (its reach-back is logged every rollout).
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
-    (logs,) = (run_dir / "tb").iterdir()
-    events = EventAccumulator(str(logs))
-    events.Reload()
-    assert [value.value for value in events.Scalars("curriculum/reach_back")][0] == pytest.approx(0.3)
-    assert read_json(run_dir / STATE_FILE)["history"][0]["reach_back"] == pytest.approx(0.3)
-    # Its learning curve draws evaluation, training episodes and the reach-back.
-    from fr5_rl.training.evaluation import plot_learning_curve, training_success
-
-    steps, rate = training_success(run_dir / "monitor")
-    assert steps[-1] <= 1024 and len(steps) == len(rate) and ((rate >= 0) & (rate <= 1)).all()
-    assert plot_learning_curve(run_dir, tmp_path / "curve.png").stat().st_size > 10_000
-
-
-def test_the_shipped_reach_model_fine_tunes_with_the_default_config_and_its_hint(tmp_path):
-    """README: ``train.py --task reach --init-from models/reach``. The shipped model was trained
-    without the joint-step hint that config/ppo_reach.yaml now adds: the run widens it by those 6
-    values (zero weights), so it starts acting exactly as the shipped model does."""
-    import gymnasium as gym
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import DummyVecEnv
-
-    import fr5_rl  # noqa: F401
-    from fr5_rl.runtime.policy import load_policy
-    from fr5_rl.training.train import load_widened
-
-    shipped = REPO / "models" / "reach"
-    assert read_json(shipped / "meta.json")["observation_size"] == 23
-    hint = yaml.safe_load(FAST_PPO_WITH_HINT)["env"]["observation"]
-    venv = DummyVecEnv([lambda: gym.make("FR5Reach-v0", config={"observation": hint})])
-    model, widened = load_widened(shipped, PPO, venv, [(23, 6)], seed=0)
-    before = load_policy(shipped, "torch")
-    rng = np.random.default_rng(1)
-    for _ in range(20):
-        observation = rng.uniform(-1, 1, 23).astype(np.float32)
-        wide = np.concatenate([observation, rng.uniform(-1, 1, 6).astype(np.float32)])
-        action, _ = model.predict(widened.normalize_obs(wide), deterministic=True)
-        np.testing.assert_allclose(np.clip(action, -1, 1), before.act(observation), atol=1e-5)
-    venv.close()
-
-    run_dir = tmp_path / "fine"
-    code = train.main(["--task", "reach", "--init-from", str(shipped), "--timesteps", "256", "--n-envs", "2",
-                       "--no-subprocess", "--eval-freq", "100000", "--no-progress", "--run-dir", str(run_dir)])
-    assert code == 0
-    assert read_json(run_dir / "final" / "meta.json")["observation_size"] == DEFAULT_REACH_SIZE
-
-
-def test_added_observation_blocks_say_where_the_new_values_go():
-    from fr5_rl.training.train import added_observation_blocks
-
-    hint = {"cartesian_step": 0.015, "rotation_step": 0.05, "damping": 0.05, "joint_step_scale": 0.04}
-
-    def meta(size, previous=0, with_hint=False):
-        return {"observation_size": size, "env_config": {"observation": {
-            "previous_actions": previous, "joint_step_hint": hint if with_hint else None}}}
-
-    assert added_observation_blocks(meta(23), meta(29, with_hint=True)) == [(23, 6)]
-    assert added_observation_blocks(meta(29, with_hint=True), meta(41, 2, True)) == [(23, 12)]
-    assert added_observation_blocks(meta(35, 2), meta(47, 3, True)) == [(35, 6), (35, 6)]
-    assert added_observation_blocks(meta(23), meta(23)) == []  # nothing new
-    assert added_observation_blocks(meta(29, with_hint=True), meta(23)) == []  # a block taken away
-    assert added_observation_blocks(meta(35, 2), meta(29, 1)) == []
-    assert added_observation_blocks(meta(24), meta(29, with_hint=True)) == []  # another layout (grasp)

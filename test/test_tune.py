@@ -18,12 +18,15 @@ import time
 from pathlib import Path
 
 import pytest
-import yaml
 
 from fr5_rl.cli import tune as tune_cli
 from fr5_rl.config import ConfigError
-from fr5_rl.training import tune
+from fr5_rl.training.tune.results import sort_rows, write_best_hyperparams
+from fr5_rl.training.tune.search_space import check_sampler, to_tune_space, trial_hyperparameters, trial_processes
+from fr5_rl.training.tune.settings import build_settings
 from fr5_rl.training.algorithms import check_hyperparameters, load_hyperparameters
+
+pytestmark = pytest.mark.slow  # a two-node Ray cluster and sweeps on it: `make test`, not `make test-fast`
 
 REPO = Path(__file__).resolve().parent.parent
 MB = 1024 * 1024
@@ -58,11 +61,11 @@ def read_rows(out: Path) -> list:
 # ----------------------------------------------------------------------------- pure parts
 def test_shipped_search_files_load_and_resolve(tmp_path):
     for algo in ("ppo", "sac"):
-        settings = tune.build_settings("reach", algo, 4, "optuna", "asha", tmp_path / algo)
+        settings = build_settings("reach", algo, 4, "optuna", "asha", tmp_path / algo)
         spec = settings.spec
         assert settings.timesteps == spec.trial.timesteps and settings.n_envs == spec.trial.n_envs
         assert settings.base_hyperparameters == load_hyperparameters(algo, "reach").to_dict()
-        assert set(tune.to_tune_space(spec.space, "optuna")) == set(spec.space)
+        assert set(to_tune_space(spec.space, "optuna")) == set(spec.space)
 
 
 def test_search_space_yaml_becomes_tune_domains():
@@ -72,7 +75,7 @@ def test_search_space_yaml_becomes_tune_domains():
     space = {"a.lr": {"loguniform": [0.0001, 0.01]}, "a.gamma": {"uniform": [0.9, 0.99]},
              "a.n": {"choice": [64, 128]}, "seed": {"randint": [0, 10]}, "a.q": {"quniform": [0.0, 1.0, 0.25]},
              "a.g": {"grid": [1, 2]}}
-    domains = tune.to_tune_space(space, "random")
+    domains = to_tune_space(space, "random")
     assert isinstance(domains["a.lr"], Float) and (domains["a.lr"].lower, domains["a.lr"].upper) == (0.0001, 0.01)
     assert isinstance(domains["a.lr"].get_sampler(), Float._LogUniform)
     assert isinstance(domains["a.gamma"].get_sampler(), Float._Uniform)
@@ -81,7 +84,7 @@ def test_search_space_yaml_becomes_tune_domains():
     assert domains["a.q"].get_sampler().q == 0.25
     assert domains["a.g"] == ray_tune.grid_search([1, 2])
     with pytest.raises(ConfigError, match="grid"):
-        tune.to_tune_space({"a.g": {"grid": [1, 2]}}, "optuna")
+        to_tune_space({"a.g": {"grid": [1, 2]}}, "optuna")
 
 
 @pytest.mark.parametrize("spec, message", [
@@ -91,38 +94,38 @@ def test_search_space_yaml_becomes_tune_domains():
 ])
 def test_bad_samplers_are_refused(spec, message):
     with pytest.raises(ConfigError, match=message):
-        tune.check_sampler("algo_kwargs.x", spec, "search.yaml")
+        check_sampler("algo_kwargs.x", spec, "search.yaml")
 
 
 def test_trial_hyperparameters_set_dotted_keys_and_refuse_unknown_ones():
     base = load_hyperparameters("ppo", "reach").to_dict()
-    hyper = tune.trial_hyperparameters(base, {"algo_kwargs.n_epochs": 3},
-                                       {"algo_kwargs.policy_kwargs.log_std_init": -0.7, "seed": 5}, 2, 1000)
+    hyper = trial_hyperparameters(base, {"algo_kwargs.n_epochs": 3},
+                                  {"algo_kwargs.policy_kwargs.log_std_init": -0.7, "seed": 5}, 2, 1000)
     assert hyper["algo_kwargs"]["n_epochs"] == 3 and hyper["algo_kwargs"]["policy_kwargs"]["log_std_init"] == -0.7
     assert hyper["algo_kwargs"]["policy_kwargs"]["net_arch"] == base["algo_kwargs"]["policy_kwargs"]["net_arch"]
     assert (hyper["n_envs"], hyper["n_timesteps"]) == (2, 1000) and "seed" not in hyper
     assert base["algo_kwargs"]["n_epochs"] == 10  # the base is not modified
     with pytest.raises(ConfigError, match="not in the hyperparameter file"):
-        tune.trial_hyperparameters(base, {}, {"algo_kwarg.gamma": 0.9}, 1, 10)
+        trial_hyperparameters(base, {}, {"algo_kwarg.gamma": 0.9}, 1, 10)
     with pytest.raises(ConfigError, match="not a mapping"):
-        tune.trial_hyperparameters(base, {}, {"n_envs.x": 1}, 1, 10)
+        trial_hyperparameters(base, {}, {"n_envs.x": 1}, 1, 10)
 
 
 def test_trial_processes_default_to_one_per_environment_and_are_capped():
-    assert [tune.trial_processes(n, None) for n in (1, 2, 4)] == [1, 2, 4]
-    assert [tune.trial_processes(16, p) for p in (1, 3, 40)] == [1, 3, 16]
+    assert [trial_processes(n, None) for n in (1, 2, 4)] == [1, 2, 4]
+    assert [trial_processes(16, p) for p in (1, 3, 40)] == [1, 3, 16]
 
 
 def test_processes_are_checked_and_saved(tmp_path):
     space = tiny_space(tmp_path)
-    assert tune.build_settings("reach", "ppo", 1, "random", "none", tmp_path, space).trial_cpus == 1
-    settings = tune.build_settings("reach", "ppo", 1, "random", "none", tmp_path, space, n_envs=4, processes=2)
+    assert build_settings("reach", "ppo", 1, "random", "none", tmp_path, space).trial_cpus == 1
+    settings = build_settings("reach", "ppo", 1, "random", "none", tmp_path, space, n_envs=4, processes=2)
     assert (settings.n_envs, settings.trial_cpus) == (4, 2)
     with pytest.raises(ConfigError, match="--processes must be at least 1"):
-        tune.build_settings("reach", "ppo", 1, "random", "none", tmp_path, space, processes=0)
+        build_settings("reach", "ppo", 1, "random", "none", tmp_path, space, processes=0)
     space.write_text(space.read_text().replace("n_envs: 1,", "n_envs: 2, processes: 3,"), encoding="utf-8")
     with pytest.raises(ConfigError, match="'trial.processes' must be 1..n_envs"):
-        tune.build_settings("reach", "ppo", 1, "random", "none", tmp_path, space)
+        build_settings("reach", "ppo", 1, "random", "none", tmp_path, space)
 
 
 def row(trial_id, success, steps, to_solve=None, status="finished"):
@@ -133,16 +136,16 @@ def row(trial_id, success, steps, to_solve=None, status="finished"):
 def test_results_are_sorted_by_score():
     rows = [row("slow", 1.0, 300, 200, "solved"), row("weak", 0.4, 900), row("broken", 0.0, 10, status="error"),
             row("fast", 1.0, 100, 80, "solved"), row("mid", 0.9, 500), row("mid_cheaper", 0.9, 200)]
-    ordered = tune.sort_rows(rows)
+    ordered = sort_rows(rows)
     assert [r["trial_id"] for r in ordered] == ["fast", "slow", "mid_cheaper", "mid", "weak", "broken"]
     assert [r["rank"] for r in ordered] == [1, 2, 3, 4, 5, 6]
 
 
 def test_best_hyperparams_round_trip_through_train_loader(tmp_path):
-    settings = tune.build_settings("reach", "ppo", 2, "random", "asha", tmp_path, tiny_space(tmp_path))
+    settings = build_settings("reach", "ppo", 2, "random", "asha", tmp_path, tiny_space(tmp_path))
     config = {"algo_kwargs.learning_rate": 0.000321, "seed": 17}
     best = {**row("t1", 0.5, 512), "config": config, "seed": 17}
-    path = tune.write_best_hyperparams(best, settings, tmp_path / "best_hyperparams.yaml")
+    path = write_best_hyperparams(best, settings, tmp_path / "best_hyperparams.yaml")
     hyper = load_hyperparameters("ppo", "reach", path)
     check_hyperparameters("ppo", hyper, hyper.n_envs, str(path))
     assert hyper.algo_kwargs["learning_rate"] == 0.000321 and hyper.algo_kwargs["n_steps"] == 128
@@ -174,7 +177,7 @@ def node_ids():
 
 
 def test_sweep_runs_trials_on_both_nodes_and_writes_its_outputs(cluster, tmp_path):
-    from fr5_rl.runtime.policy import load_policy
+    from fr5_rl.deploy.policy import load_policy
 
     out = tmp_path / "out"
     # two environments in each one-CPU trial: --processes 1 steps both in the trainer's process

@@ -90,7 +90,7 @@ def test_an_error_in_every_chunk_leaves_the_pipes_in_step():
     chunked = ChunkedSubprocVecEnv(factories(4), 2, start_method="forkserver")
     try:
         observations = chunked.reset()
-        with pytest.raises(Exception):
+        with pytest.raises(ValueError, match="the action must have shape"):
             chunked.step(np.zeros((4, 3), dtype=np.float32))  # 3 numbers for 7 actuators
         good = np.zeros((4,) + chunked.action_space.shape, dtype=np.float32)
         next_observations, rewards, dones, infos = chunked.step(good)

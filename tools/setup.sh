@@ -69,7 +69,7 @@ if [ -f /opt/ros/noetic/setup.bash ]; then
 else
   ros_flavour=debian
   if ! command -v apt-get >/dev/null; then
-    echo "[setup] no /opt/ros/noetic and no apt-get: install ROS Noetic first (see README)" >&2; exit 1
+    echo "[setup] no /opt/ros/noetic and no apt-get: install ROS Noetic first (see docs/setup.md)" >&2; exit 1
   fi
   apt_install_missing "${debian_ros_packages[@]}"
 fi

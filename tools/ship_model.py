@@ -7,7 +7,7 @@ time to solve and machine), exports model.onnx with the parity check, evaluates 
 seeds into eval.json/eval.csv (``scripts/evaluate.py``, as a subprocess: eval.json is what that
 command writes), and draws the learning curve into docs/.
 
-Imports library modules only (``fr5_rl.runtime``, ``fr5_rl.training``), never ``fr5_rl.cli``.
+Imports library modules only (``fr5_rl.deploy``, ``fr5_rl.training``), never ``fr5_rl.cli``.
 """
 import argparse
 import json
@@ -20,7 +20,7 @@ from typing import List, Optional
 
 from benchlib import REPO
 
-from fr5_rl.runtime.bundle import META_FILE, MODEL_FILE, STATS_FILE, ModelFilesError, read_meta, write_json_atomic
+from fr5_rl.deploy.bundle import META_FILE, MODEL_FILE, STATS_FILE, ModelFilesError, read_meta, write_json_atomic
 from fr5_rl.training.evaluation import plot_learning_curve
 from fr5_rl.training.onnx_export import PARITY_TOLERANCE, export, parity
 

@@ -7,11 +7,12 @@ command mapped to an opening width in [0, max opening width] (m).
 from __future__ import annotations
 
 import math
-from typing import Any, List, Mapping, Sequence
+from typing import List, Sequence
 
 import numpy as np
 
 from .config import RobotSpec
+from .env_config import ActionConfig
 
 ACTION_SIZE = 7
 
@@ -55,9 +56,9 @@ class JointCommandShaper:
     numpy's per-call overhead, and it runs in every simulated step.
     """
 
-    def __init__(self, robot: RobotSpec, action_cfg: Mapping[str, Any], control_dt: float) -> None:
-        self._max_step = float(action_cfg["max_joint_step"])
-        self._alpha = float(action_cfg["smoothing_alpha"])
+    def __init__(self, robot: RobotSpec, action_cfg: ActionConfig, control_dt: float) -> None:
+        self._max_step = action_cfg.max_joint_step
+        self._alpha = action_cfg.smoothing_alpha
         self._n_joints = len(robot.joint_names)
         self._step_limit = (robot.velocity_limits * float(control_dt)).tolist()
         self._lower, self._upper = robot.lower_limits.tolist(), robot.upper_limits.tolist()

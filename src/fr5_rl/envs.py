@@ -15,16 +15,17 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple, Union
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .config import load_env_config, load_robot_spec, object_rest_z, simulation_settings
+from .config import load_robot_spec
+from .env_config import EnvConfig, load_env_config
 from .control import ACTION_SIZE, JointCommandShaper, finite_values
 from .kinematics import ForwardKinematics
-from .observation import ActionHistory, ObservationBuilder
+from .observation import ActionHistory, ObservationBuilder, velocity_from_positions
 from .sim.robot import FR5Robot
 from .sim.world import PyBulletWorld
 from .tasks import GraspTask, ReachTask, Task, TaskOutcome, TaskState
@@ -132,39 +133,39 @@ class FR5Env(gym.Env):
 
     Args:
         task: "reach" or "grasp".
-        config: overrides merged into ``config/env.yaml`` (unknown keys are refused).
+        config: overrides merged into ``config/env.yaml`` (unknown keys are refused), or an
+            :class:`~fr5_rl.env_config.EnvConfig` already loaded.
         render_mode: None, "rgb_array" (headless TinyRenderer) or "human" (PyBullet GUI).
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 50}
 
-    def __init__(self, task: str = "reach", config: Optional[Mapping[str, Any]] = None,
+    def __init__(self, task: str = "reach", config: Union[EnvConfig, Mapping[str, Any], None] = None,
                  render_mode: Optional[str] = None) -> None:
         super().__init__()
         if task not in TASKS:
             raise ValueError(f"unknown task '{task}'; choose one of {sorted(TASKS)}")
         if render_mode not in (None, "rgb_array", "human"):
             raise ValueError(f"render_mode must be None, 'rgb_array' or 'human', got {render_mode!r}")
-        self.cfg = load_env_config(config)
+        self.cfg: EnvConfig = config if isinstance(config, EnvConfig) else load_env_config(config)
         self.robot_spec = load_robot_spec()
         self.render_mode = render_mode
-        self.control_dt = float(self.cfg["simulation"]["control_dt"])
+        self.control_dt = self.cfg.simulation.control_dt
         self.task: Task = TASKS[task](self.cfg, self.robot_spec.max_opening_width)
         self.kinematics = ForwardKinematics(self.robot_spec)
-        self.shaper = JointCommandShaper(self.robot_spec, self.cfg["action"], self.control_dt)
-        self.observation_builder = ObservationBuilder(self.robot_spec, self.cfg["observation"], self.task.include_lift)
+        self.shaper = JointCommandShaper(self.robot_spec, self.cfg.action, self.control_dt)
+        self.observation_builder = ObservationBuilder(self.robot_spec, self.cfg.observation, self.task.include_lift)
         self.observation_space = spaces.Box(-1.0, 1.0, (self.observation_builder.size,), dtype=np.float32)
         self._action_history = ActionHistory(self.observation_builder.previous_actions)
         self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
 
-        sim_cfg = simulation_settings(self.cfg, task)
-        self._physics_dt = float(sim_cfg["physics_dt"])
+        sim_cfg = self.cfg.simulation_for(task)
+        self._physics_dt = sim_cfg.physics_dt
         self.world = PyBulletWorld(sim_cfg, gui=render_mode == "human", renders=render_mode is not None)
-        self.world.add_table(self.cfg["table"])
+        self.world.add_table(self.cfg.table)
         self.robot = FR5Robot(self.world.client, self.robot_spec, sim_cfg)
         self.robot.stand_on(self.world.table_id)  # its base never counts as touching the table
-        obj = self.cfg["object"]
-        self._object_rest_z = float(self.cfg["table"]["top_height"])  # set per episode with the object's size
+        self._object_rest_z = self.cfg.table.top_height  # set per episode with the object's size
         self._object_dims: Tuple[float, ...] = ()  # set per episode
         self._joint_state_names = tuple(self.robot_spec.joint_names) + tuple(self.robot_spec.finger_joint_names)
         self._object_start: Tuple[float, float, float] = (0.0, 0.0, self._object_rest_z)
@@ -184,22 +185,32 @@ class FR5Env(gym.Env):
         self._standing_command: Tuple[Sequence[float], float] = ((), 0.0)
         self._steps = 0
         self._state: Optional[TaskState] = None  # the last one observed
-        self._workspace = (tuple(self.cfg["workspace"]["low"]), tuple(self.cfg["workspace"]["high"]))
-        self._object_cfg = obj
+        # observation.joint_velocity_source: positions: the last observed sample (positions,
+        # time s) and estimate, None at the start of an episode.
+        self._velocities_from_positions = self.cfg.observation.joint_velocity_source == "positions"
+        self._velocity_sample: Optional[Tuple[Sequence[float], float, List[float]]] = None
+        self._workspace = (tuple(self.cfg.workspace.low), tuple(self.cfg.workspace.high))
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None
               ) -> Tuple[np.ndarray, Dict[str, Any]]:
+        """A new episode. ``options``: ``object_xy`` (m, base_link) places the object there;
+        ``arm_positions`` (rad, j1..j6) keeps the arm there instead of a start drawn around home
+        (the random draws are made either way, so a seed places the same object)."""
         super().reset(seed=seed)
         rng = self.np_random
         self._apply_randomisation(rng)
-        low, high = np.asarray(self._object_cfg["region_low"]), np.asarray(self._object_cfg["region_high"])
+        low, high = np.asarray(self.cfg.object.region_low), np.asarray(self.cfg.object.region_high)
         xy = rng.uniform(low, high) if not options or "object_xy" not in options else np.asarray(options["object_xy"])
         self._object_start = (float(xy[0]), float(xy[1]), self._object_rest_z)
         self.world.place_object(self._object_start, yaw=float(rng.uniform(-np.pi, np.pi)))
 
-        noise = float(self.cfg[self.task.name]["start_joint_noise"])
+        noise = self.cfg.task(self.task.name).start_joint_noise
         start = self.robot_spec.home_joint_positions + rng.uniform(-noise, noise, 6)
+        if options and "arm_positions" in options:
+            # The arm stays where it is (a real arm between episodes: only the object is placed);
+            # the draw above still happens, so the object of every seed is gym's.
+            start = finite_values(options["arm_positions"], 6, "options['arm_positions']")
         start = np.clip(start, self.robot_spec.lower_limits, self.robot_spec.upper_limits)
         self._gripper_command_width = self._sent_gripper_width = self.robot_spec.max_opening_width
         self.robot.reset(start, self._gripper_command_width)
@@ -209,6 +220,7 @@ class FR5Env(gym.Env):
         self._action_queue.clear()
         self._standing_command = (tuple(start), self._gripper_command_width)
         self._steps = 0
+        self._velocity_sample = None
         state, obs = self._observe()
         self.task.prime(state)
         return obs, {"is_success": False, "failure": None, "object_start": np.array(self._object_start)}
@@ -227,9 +239,9 @@ class FR5Env(gym.Env):
         # floats (the observation refuses anything else), so the shaper's checks are not repeated.
         targets = self.shaper.targets_from_floats(applied, self._observed_joint_positions)
         width = sent_width if applied is values else self.shaper.gripper_width(applied)
-        measured_early = self._run_period(targets, width)
-
-        state, obs = self._observe(measured_early)
+        early = self._run_period(targets, width)
+        measured_early, age = early if early is not None else (None, 0.0)
+        state, obs = self._observe(measured_early, (self._steps + 1) * self.control_dt - age)
         success, failure, terminated, truncated, _, outcome = self.judge_period(state)
         parts = self.task.reward(outcome, values)
         info: Dict[str, Any] = {"is_success": success, "failure": failure}
@@ -291,14 +303,14 @@ class FR5Env(gym.Env):
 
         :return: see :class:`SceneDescription`.
         """
-        table = self.cfg["table"]
-        sx, sy, thickness = (float(v) for v in table["size"])
-        cx, cy = (float(v) for v in table["center_xy"])
-        top = float(table["top_height"])
+        table = self.cfg.table
+        sx, sy, thickness = table.size
+        cx, cy = table.center_xy
+        top = table.top_height
         return SceneDescription(
             frame_id=self.robot_spec.base_frame, table_size=(sx, sy, thickness),
             table_center=(cx, cy, top - thickness / 2.0), table_top_height=top,
-            object_shape=str(self._object_cfg["shape"]), object_dims=tuple(float(d) for d in self._object_dims),
+            object_shape=self.cfg.object.shape, object_dims=tuple(float(d) for d in self._object_dims),
             object_rest_z=self._object_rest_z,
         )
 
@@ -367,14 +379,14 @@ class FR5Env(gym.Env):
         return EpisodeVerdict(success, "timeout" if truncated else failure, terminated, truncated, steps, outcome)
 
     # ------------------------------------------------------------------ internals
-    def _run_period(self, arm_targets: Sequence[float], gripper_width: float) -> Optional[tuple]:
+    def _run_period(self, arm_targets: Sequence[float], gripper_width: float) -> Optional[Tuple[tuple, float]]:
         """One control period of :meth:`step`, with the real-time loop's timing if randomised:
         the previous command stands for the first ``command_delay`` of the period (a driver's
         servo cycle, a late command), and the observation is measured ``observation_age``
         before the period ends (a joint state published at a lower rate than the loop runs).
 
-        :return: the robot's measurement (:meth:`FR5Robot.measure`) taken early, or None when
-            the observation is measured at the end of the period.
+        :return: the robot's measurement (:meth:`FR5Robot.measure`) taken early and how long (s)
+            before the period's end, or None when the observation is measured at its end.
         """
         if not self._period_timing:
             self.advance_period(arm_targets, gripper_width)
@@ -397,7 +409,7 @@ class FR5Env(gym.Env):
             self.world.step_physics()
         self._gripper_command_width = float(gripper_width)
         self._standing_command = (arm_targets, gripper_width)
-        return measured
+        return (measured, age * physics_dt) if measured is not None else None
 
     def _draw_substeps(self, seconds_range: Tuple[float, float], most: int) -> int:
         """A duration drawn uniformly from ``seconds_range``, in whole physics steps."""
@@ -447,9 +459,10 @@ class FR5Env(gym.Env):
             tcp_in_workspace=x_low <= x <= x_high and y_low <= y <= y_high and z_low <= z <= z_high,
         )
 
-    def _observe(self, measured_early: Optional[tuple] = None) -> Tuple[TaskState, np.ndarray]:
+    def _observe(self, measured_early: Optional[tuple] = None, sample_time: float = 0.0) -> Tuple[TaskState, np.ndarray]:
         """The task state now, and the observation: of the state now, or of the robot as
-        ``measured_early`` (an older joint state; the object is seen now)."""
+        ``measured_early`` (an older joint state; the object is seen now). ``sample_time`` (s
+        since the reset) is when the observed joint state was sampled."""
         self._state = state = self.task_state()
         q, tcp_position, tcp_axis, object_position = (
             state.joint_positions, state.tcp_position, state.tcp_approach_axis, state.object_position)
@@ -465,11 +478,27 @@ class FR5Env(gym.Env):
             # The tcp pose follows the noisy joints, as FK of a noisy encoder reading would.
             tcp_position, tcp_rotation = self.kinematics.tcp_pose(q)
             tcp_axis = tcp_rotation[:, 2]
+        if self._velocities_from_positions:
+            velocities = self._estimate_velocities(q, sample_time)
         obs = self.observation_builder.build_from(
             q, velocities, width, self._sent_gripper_width, tcp_position, tcp_axis,
             object_position, object_position[2] - self._object_rest_z, self._action_history.values(),
         )
         return state, obs
+
+    def _estimate_velocities(self, positions: Sequence[float], sample_time: float) -> List[float]:
+        """Velocities from this observed sample and the last one, as the policy node estimates
+        them behind a driver that reports none; zeros at the start of an episode."""
+        positions = [float(value) for value in positions]
+        if self._velocity_sample is None:
+            velocities = [0.0] * len(positions)
+        else:
+            previous, previous_time, previous_velocities = self._velocity_sample
+            elapsed = sample_time - previous_time
+            velocities = [velocity_from_positions(now, before, elapsed, velocity)
+                          for now, before, velocity in zip(positions, previous, previous_velocities)]
+        self._velocity_sample = (positions, sample_time, velocities)
+        return velocities
 
     @property
     def object_rest_z(self) -> float:
@@ -478,38 +507,38 @@ class FR5Env(gym.Env):
 
     def _apply_randomisation(self, rng: np.random.Generator) -> None:
         """Object size/mass/friction, joint damping, latency, observation noise (if enabled)."""
-        obj, rnd = self._object_cfg, self.cfg["randomisation"]
-        on = bool(rnd["enabled"])
-        share = float(rnd.get("plain_episode_share", 0.0))
+        obj, rnd = self.cfg.object, self.cfg.randomisation
+        on = rnd.enabled
+        share = rnd.plain_episode_share
         if on and share > 0.0:  # drawn only when asked for: other configurations keep their episodes
             on = bool(rng.uniform() >= share)
-        size = rng.uniform(*rnd["object_size_scale"]) if on else 1.0
-        mass = float(obj["mass"]) * (rng.uniform(*rnd["object_mass_scale"]) if on else 1.0)
-        friction = float(obj["lateral_friction"]) * (rng.uniform(*rnd["friction_scale"]) if on else 1.0)
-        if obj["shape"] == "cylinder":
-            dims = (float(obj["radius"]) * size, float(obj["height"]) * size)
+        size = rng.uniform(*rnd.object_size_scale) if on else 1.0
+        mass = obj.mass * (rng.uniform(*rnd.object_mass_scale) if on else 1.0)
+        friction = obj.lateral_friction * (rng.uniform(*rnd.friction_scale) if on else 1.0)
+        if obj.shape == "cylinder":
+            dims = (obj.radius * size, obj.height * size)
         else:
-            dims = (float(obj["half_extent"]) * size,)
-        self._object_rest_z = object_rest_z(self.cfg, size)
-        self.world.set_object(str(obj["shape"]), dims, mass, friction)
+            dims = (obj.half_extent * size,)
+        self._object_rest_z = self.cfg.object_rest_z(size)
+        self.world.set_object(obj.shape, dims, mass, friction)
         self._object_dims = dims
-        self.robot.set_joint_damping(rng.uniform(*rnd["joint_damping"]) if on else 0.0)
+        self.robot.set_joint_damping(rng.uniform(*rnd.joint_damping) if on else 0.0)
         # The simulated position controller tracks differently at other physics steps: drawing
         # the step per episode keeps a policy from relying on one simulator's exact response.
-        choices = rnd.get("physics_dt_choices") or []
+        choices = rnd.physics_dt_choices
         physics_dt = float(rng.choice(choices)) if on and choices else self._physics_dt
         if physics_dt != self.world.physics_dt:
             self.world.set_physics_dt(physics_dt, self.control_dt)
-        lo, hi = (int(v) for v in rnd["action_latency_steps"])
+        lo, hi = rnd.action_latency_steps
         self._latency_steps = int(rng.integers(lo, hi + 1)) if on else 0
-        self._obs_noise_std = float(rnd["observation_noise_std"]) if on else 0.0
+        self._obs_noise_std = rnd.observation_noise_std if on else 0.0
         # Without timing_share, every perturbed episode has the in-period timing and every plain
         # one none: a policy then reads "no jitter" as "no latency" and rushes into whole-step
         # latency alone. Drawn only when asked for, so other configurations keep their episodes.
         timing = on
-        timing_share = float(rnd.get("timing_share", 1.0))
+        timing_share = rnd.timing_share
         if on and timing_share < 1.0:
             timing = bool(rng.uniform() < timing_share)
-        self._command_delay_range = tuple(float(v) for v in rnd["command_delay_s"]) if timing else (0.0, 0.0)
-        self._observation_age_range = tuple(float(v) for v in rnd["observation_age_s"]) if timing else (0.0, 0.0)
+        self._command_delay_range = tuple(rnd.command_delay_s) if timing else (0.0, 0.0)
+        self._observation_age_range = tuple(rnd.observation_age_s) if timing else (0.0, 0.0)
         self._period_timing = self._command_delay_range[1] > 0.0 or self._observation_age_range[1] > 0.0

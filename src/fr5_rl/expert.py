@@ -37,7 +37,7 @@ class ScriptedExpert:
         home_position, home_rotation = self.env.kinematics.tcp_pose(spec.home_joint_positions)
         # Keep the home pose's tcp yaw: only the approach axis matters to the tasks.
         self._down_quaternion = list(quaternion_from_matrix(home_rotation))
-        self._max_step = float(self.env.cfg["action"]["max_joint_step"])
+        self._max_step = self.env.cfg.action.max_joint_step
         self.phase = "hover"
 
     def reset(self) -> None:

@@ -50,6 +50,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence
 import numpy as np
 
 from .config import RobotSpec
+from .env_config import JointStepHintConfig, ObservationConfig
 from .kinematics import ForwardKinematics
 
 REACH_OBSERVATION_SIZE = 23  # without previous actions
@@ -58,32 +59,32 @@ ARM_ACTION_SIZE = 6  # the arm components of the action (the seventh is the grip
 
 
 def previous_action_count(obs_cfg: Mapping[str, Any]) -> int:
-    """How many previous actions the observation carries (``observation.previous_actions``).
+    """How many previous actions a model's saved ``observation`` section (``meta.json``) carries.
 
-    A configuration without the key (a model trained before it existed) carries none. The
-    config loader checks the value (:func:`fr5_rl.config.validate_env_config`).
+    A section without the key (a model trained before it existed) carries none.
     """
     return int(obs_cfg.get("previous_actions", 0))
 
 
 def joint_step_hint_settings(obs_cfg: Mapping[str, Any]) -> Optional[Mapping[str, Any]]:
-    """``observation.joint_step_hint``, or None where it is off (null, or a model trained before
-    the key existed). The config loader checks its values (:func:`fr5_rl.config.validate_env_config`)."""
+    """A model's saved ``observation.joint_step_hint`` (``meta.json``), or None where it is off
+    (null, or a model trained before the key existed)."""
     return obs_cfg.get("joint_step_hint") or None
 
 
 def saved_observation_settings(obs_cfg: Mapping[str, Any]) -> Dict[str, Any]:
     """A model's saved ``observation`` section with the keys added since filled in as that model
-    was built: no previous actions, no joint-step hint."""
+    was built: no previous actions, no joint-step hint, measured joint velocities."""
     return {**obs_cfg, "previous_actions": previous_action_count(obs_cfg),
-            "joint_step_hint": joint_step_hint_settings(obs_cfg)}
+            "joint_step_hint": joint_step_hint_settings(obs_cfg),
+            "joint_velocity_source": obs_cfg.get("joint_velocity_source", "measured")}
 
 
-def observation_size(task: str, obs_cfg: Mapping[str, Any]) -> int:
+def observation_size(task: str, obs_cfg: ObservationConfig) -> int:
     """Length of the observation vector of ``task`` (``reach`` or ``grasp``) under ``obs_cfg``."""
     base = GRASP_OBSERVATION_SIZE if task == "grasp" else REACH_OBSERVATION_SIZE
-    hint = ARM_ACTION_SIZE if joint_step_hint_settings(obs_cfg) else 0
-    return base + ARM_ACTION_SIZE * previous_action_count(obs_cfg) + hint
+    hint = ARM_ACTION_SIZE if obs_cfg.joint_step_hint is not None else 0
+    return base + ARM_ACTION_SIZE * obs_cfg.previous_actions + hint
 
 
 class JointStepHint:
@@ -101,12 +102,12 @@ class JointStepHint:
         (rad), the step read as 1 (``action.max_joint_step``: the hint then reads as an action).
     """
 
-    def __init__(self, robot: RobotSpec, settings: Mapping[str, Any]) -> None:
+    def __init__(self, robot: RobotSpec, settings: JointStepHintConfig) -> None:
         self._kinematics = ForwardKinematics(robot)
-        self._cartesian_step = float(settings["cartesian_step"])
-        self._rotation_step = float(settings["rotation_step"])
-        self._damping = float(settings["damping"]) ** 2 * np.eye(6)
-        self._gain = 1.0 / float(settings["joint_step_scale"])
+        self._cartesian_step = settings.cartesian_step
+        self._rotation_step = settings.rotation_step
+        self._damping = settings.damping ** 2 * np.eye(6)
+        self._gain = 1.0 / settings.joint_step_scale
 
     def __call__(self, joint_positions: Sequence[float], object_position: Sequence[float]) -> List[float]:
         """Six values in [-1, 1]: the hinted step of j1..j6 / ``joint_step_scale``.
@@ -131,6 +132,26 @@ class JointStepHint:
         gain = self._gain
         return [1.0 if value > 1.0 else (-1.0 if value < -1.0 else value)
                 for value in (jacobian.T @ weights * gain).tolist()]
+
+
+# Two samples closer than this (s) are one sample twice (a repeated message): no new estimate.
+MIN_SAMPLE_INTERVAL = 1e-4
+
+
+def velocity_from_positions(position: float, previous_position: float, elapsed: float,
+                            previous_velocity: float) -> float:
+    """A joint's velocity (rad/s) from two position samples ``elapsed`` s apart: what a driver
+    that reports none leaves the policy (the FAIRINO driver's velocities are all 0.0). The policy
+    node's :class:`~fr5_rl.deploy.joint_state.JointStateReader` and the environments
+    (``observation.joint_velocity_source: positions``) both estimate with this, from the samples
+    they get (50 Hz behind the FAIRINO driver, one a control period in the environment).
+
+    :param previous_velocity: the estimate to keep when the samples are one (``elapsed`` under
+        :data:`MIN_SAMPLE_INTERVAL`).
+    """
+    if elapsed < MIN_SAMPLE_INTERVAL:
+        return previous_velocity
+    return (position - previous_position) / elapsed
 
 
 class ActionHistory:
@@ -190,17 +211,17 @@ class ObservationBuilder:
     values as arguments (the environments' step path).
     """
 
-    def __init__(self, robot: RobotSpec, obs_cfg: Mapping[str, Any], include_lift: bool) -> None:
+    def __init__(self, robot: RobotSpec, obs_cfg: ObservationConfig, include_lift: bool) -> None:
         self.include_lift = include_lift
-        self.previous_actions = previous_action_count(obs_cfg)
+        self.previous_actions = obs_cfg.previous_actions
         self._state_size = GRASP_OBSERVATION_SIZE if include_lift else REACH_OBSERVATION_SIZE
         self.size = self._state_size + ARM_ACTION_SIZE * self.previous_actions
-        hint = joint_step_hint_settings(obs_cfg)
+        hint = obs_cfg.joint_step_hint
         self.joint_step_hint: Optional[JointStepHint] = None if hint is None else JointStepHint(robot, hint)
         if self.joint_step_hint is not None:
             self.size += ARM_ACTION_SIZE
-        low = np.asarray(obs_cfg["tcp_position_low"], dtype=np.float64)
-        high = np.asarray(obs_cfg["tcp_position_high"], dtype=np.float64)
+        low = np.asarray(obs_cfg.tcp_position_low, dtype=np.float64)
+        high = np.asarray(obs_cfg.tcp_position_high, dtype=np.float64)
         half_width = robot.max_opening_width / 2.0
         offset = np.zeros(GRASP_OBSERVATION_SIZE)
         half_range = np.ones(GRASP_OBSERVATION_SIZE)
@@ -209,8 +230,8 @@ class ObservationBuilder:
         half_range[6:12] = robot.velocity_limits
         offset[12:14], half_range[12:14] = half_width, half_width
         offset[14:17], half_range[14:17] = (high + low) / 2.0, (high - low) / 2.0
-        half_range[20:23] = float(obs_cfg["relative_position_scale"])
-        half_range[23] = float(obs_cfg["lift_scale"])
+        half_range[20:23] = obs_cfg.relative_position_scale
+        half_range[23] = obs_cfg.lift_scale
         gain = 1.0 / half_range[: self._state_size]
         self._gain, self._bias = gain.tolist(), (offset[: self._state_size] * gain).tolist()
 

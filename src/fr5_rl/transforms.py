@@ -1,13 +1,41 @@
 """Rigid transforms as 4x4 matrices, and the static transform table in config/ (no ROS needed)."""
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 
-from .config import ConfigError, StaticTransforms, load_typed
+from .config import ConfigError, load_typed
 from .kinematics import rotation_from_rpy
+
+
+@dataclass(frozen=True)
+class StaticTransform:
+    """One fixed frame: ``child`` in ``parent``, xyz (m) and URDF roll-pitch-yaw (rad)."""
+
+    parent: str
+    child: str
+    xyz: List[float]
+    rpy: List[float]
+
+
+@dataclass(frozen=True)
+class StaticTransforms:
+    """``config/static_transforms.yaml``: every transform published on /tf_static."""
+
+    transforms: List[StaticTransform]
+
+    def check(self, source: str) -> None:
+        for index, item in enumerate(self.transforms):
+            if len(item.xyz) != 3 or len(item.rpy) != 3 or not np.all(np.isfinite(item.xyz + item.rpy)):
+                raise ConfigError(f"{source}: 'transforms[{index}]' ({item.parent} -> {item.child}): "
+                                  "xyz and rpy need 3 finite values each")
+        children = [item.child for item in self.transforms]
+        if len(set(children)) != len(children):
+            raise ConfigError(f"{source}: a child frame appears twice (tf allows one parent per frame)")
+
 
 
 def matrix_from_xyz_rpy(xyz, rpy) -> np.ndarray:
@@ -64,11 +92,34 @@ def matrix_from_quaternion(xyz, quaternion) -> np.ndarray:
 
 
 def load_static_transforms(path: str | Path = "static_transforms") -> List[Dict]:
-    """Entries of ``config/static_transforms.yaml`` (or ``path``), checked by
-    :class:`~fr5_rl.config.StaticTransforms`: dicts with parent, child, xyz, rpy, matrix (4x4)."""
+    """Entries of ``config/static_transforms.yaml`` (or ``path``: a path, or a name in ``config/``,
+    e.g. ``camera_frames``), checked by :class:`StaticTransforms`: dicts with parent, child,
+    xyz (m), rpy (rad), matrix (4x4)."""
     table = load_typed(StaticTransforms, path)
     return [{"parent": item.parent, "child": item.child, "xyz": item.xyz, "rpy": item.rpy,
              "matrix": matrix_from_xyz_rpy(item.xyz, item.rpy)} for item in table.transforms]
+
+
+def load_transform_files(paths: Sequence[str | Path]) -> List[Dict]:
+    """The entries of several transform files (paths, or names in ``config/``), in order, as one
+    table, as :func:`load_static_transforms` gives them plus ``source`` (the path or name it
+    came from, as given). A child frame listed in two files is
+    refused: tf allows one parent per frame (e.g. a mount file that still holds the camera's
+    optical frame, which the camera driver publishes).
+
+    :param paths: the files, e.g. ``["static_transforms", "camera_frames"]``.
+    :raises ConfigError: a file is missing or wrong, or two files set the same child frame.
+    """
+    entries: List[Dict] = []
+    owner: Dict[str, str] = {}
+    for path in paths:
+        for entry in load_static_transforms(path):
+            if entry["child"] in owner:
+                raise ConfigError(f"{entry['child']} has a parent in both {owner[entry['child']]} and {path}: "
+                                  "tf allows one parent per frame")
+            owner[entry["child"]] = str(path)
+            entries.append({**entry, "source": str(path)})
+    return entries
 
 
 def transform_in(entries: List[Dict], parent: str, child: str) -> np.ndarray:
@@ -81,7 +132,8 @@ def transform_in(entries: List[Dict], parent: str, child: str) -> np.ndarray:
         entry = by_child.get(frame)
         hops += 1
         if entry is None or hops > len(entries):  # not listed, or a loop of entries that never reaches parent
-            raise ConfigError(f"config/static_transforms.yaml does not connect {child} to {parent}")
+            raise ConfigError(f"the static transforms (config/static_transforms.yaml, and config/camera_frames.yaml "
+                              f"where given) do not connect {child} to {parent}")
         matrix = entry["matrix"] @ matrix
         frame = entry["parent"]
     return matrix

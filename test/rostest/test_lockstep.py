@@ -14,7 +14,7 @@ import rostest
 from std_msgs.msg import String
 
 from fr5_rl.config import package_root
-from fr5_rl.runtime.policy import load_policy
+from fr5_rl.deploy.policy import load_policy
 from fr5_rl.training.evaluation import run_episodes
 
 

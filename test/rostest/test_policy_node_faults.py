@@ -17,8 +17,8 @@ import rostest
 from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Log
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
-from std_srvs.srv import SetBool
+from std_msgs.msg import Bool, Float64MultiArray
+from std_srvs.srv import SetBool, Trigger
 
 from fr5_rl.config import load_robot_spec
 from fr5_rl.transforms import load_static_transforms, transform_in
@@ -35,7 +35,9 @@ class RobotAndCamera:
         self.joint_mode = "good"
         self.camera_mode = "good"
         self.lock = threading.Lock()
-        self.commands = []  # (time, values, positions when received)
+        self.commands = []  # times of the commands
+        self.steps = []  # (time, largest joint step of the command, rad)
+        self.glitch_next = False
         self.invalid = []
         camera_in_base = transform_in(load_static_transforms(), "base_link", "camera_link")
         # Held 25 cm above the table: with no simulator to end the episode at the goal, a target
@@ -61,6 +63,7 @@ class RobotAndCamera:
             else:
                 self.positions = values  # a perfectly tracking arm
             self.commands.append(rospy.get_time())
+            self.steps.append((rospy.get_time(), float(np.abs(values - measured).max()) if values.shape == (6,) else 0.0))
 
     def publish_joints(self, _event):
         if self.joint_mode == "silent":
@@ -85,6 +88,11 @@ class RobotAndCamera:
             message.name.append("j3")
             message.position.append(positions[2] + 0.47)
             message.velocity.append(0.0)
+        elif self.joint_mode == "glitch":  # every other state 0.3 rad off on every joint: 15 rad/s and back
+            self.glitch_next = not self.glitch_next
+            if self.glitch_next:
+                for name in self.spec.joint_names:
+                    message.position[message.name.index(name)] += 0.3
         elif self.joint_mode == "split":  # arm and fingers from two drivers, in separate messages
             fingers = set(self.spec.finger_joint_names)
             for keep in (lambda n: n not in fingers, lambda n: n in fingers):
@@ -138,6 +146,10 @@ class TestPolicyNodeFaults(unittest.TestCase):
             reasons = [text for t, text in warnings if t >= start]
             return count, (end - start - settle), reasons
 
+        # Started as a user would with rosrun: paused. Nothing moves until ~enable true.
+        rospy.sleep(2.0)
+        self.assertEqual(world.count_commands(0, 1e12), 0, "the node commanded before ~enable")
+        self.assertTrue(enable(True).success)
         # Wait until the node runs with good inputs (model loading takes a few seconds).
         deadline = rospy.get_time() + 40.0
         while world.count_commands(0, 1e12) == 0 and rospy.get_time() < deadline:
@@ -156,6 +168,7 @@ class TestPolicyNodeFaults(unittest.TestCase):
             ("target in an unknown frame", dict(camera_mode="unknown_frame"), "no transform"),
             ("nan target", dict(camera_mode="nan"), "NaN"),
             ("stale joint states", dict(joint_mode="silent"), "stale"),
+            ("joint states glitching", dict(joint_mode="glitch"), "no real motion"),
             ("stale target", dict(camera_mode="silent", settle=0.8), "stale"),
         ]
         for name, modes, reason in faults:
@@ -172,10 +185,44 @@ class TestPolicyNodeFaults(unittest.TestCase):
         count, window, reasons = phase("split messages", 2.0, joint_mode="split")
         self.assertGreaterEqual(count, 0.9 * 50 * window, f"split joint states: {count} commands ({reasons[:3]})")
 
+        # A gripper fault reported by the bridge holds the arm until it clears.
+        fault = rospy.Publisher("/fr5/gripper/fault", Bool, queue_size=1, latch=True)
+        fault.publish(Bool(data=True))
+        count, _, reasons = phase("gripper fault", 1.5)
+        self.assertEqual(count, 0, "commands published while the gripper reported a fault")
+        self.assertTrue(any("gripper reports a fault" in text for text in reasons), reasons[:3])
+        fault.publish(Bool(data=False))
+        count, window, _ = phase("gripper fault cleared", 1.0)
+        self.assertGreaterEqual(count, 0.6 * 50 * window, "the node did not resume after the gripper fault cleared")
+
+        # Far from the training start (an operator moved the arm): a new episode is refused with
+        # the distance; ~go_to_start moves it there slowly, then the policy runs again.
+        with world.lock:
+            world.positions = spec.home_joint_positions + np.array([0.4, -0.2, 0.0, 0.0, 0.0, 0.0])
+        reset, go_to_start = (rospy.ServiceProxy(f"/fr5_policy/{name}", Trigger) for name in ("reset", "go_to_start"))
+        answer = reset()
+        self.assertFalse(answer.success)
+        self.assertIn("0.400 rad from the training start on j1", answer.message)
+        count, _, _ = phase("far from the start", 1.0)
+        self.assertEqual(count, 0, "commands published far from the training start without ~go_to_start")
+        move_start = rospy.get_time()
+        answer = go_to_start()
+        self.assertTrue(answer.success, answer.message)
+        with world.lock:
+            move = [step for t, step in world.steps if t >= move_start]
+            at_start = np.abs(world.positions - spec.home_joint_positions).max()
+        self.assertGreaterEqual(len(move), 0.35 / (0.3 * 0.02), "the start move was not a slow one")
+        self.assertLessEqual(max(move), 0.3 * 0.02 + 1e-6, "the start move went faster than 0.3 rad/s")
+        self.assertLessEqual(at_start, 0.02 + 1e-6)
+        count, window, _ = phase("policy after the start move", 1.0)
+        self.assertGreaterEqual(count, 0.6 * 50 * window, "the policy did not take over after the start move")
+
         self.assertTrue(enable(False).success)
         count, _, _ = phase("disabled", 1.0)
         self.assertEqual(count, 0, "commands published while disabled")
         self.assertTrue(enable(True).success)
+        # Enabling looks at the start again: wherever the policy left the arm, back to the start first.
+        self.assertTrue(go_to_start().success)
         count, window, _ = phase("re-enabled", 1.0)
         self.assertGreaterEqual(count, 0.6 * 50 * window, "the node did not resume after ~enable true")
         self.assertEqual(world.invalid, [], "invalid commands were published")

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
-"""rostest node: every transform of config/static_transforms.yaml is on /tf_static, in one
-message (one StaticTransformBroadcaster call), and tf2 returns exactly the configured pose."""
+"""rostest node: every transform of the node's files (``/static_transforms/config``: by default
+config/static_transforms.yaml; a list, e.g. with config/camera_frames.yaml) is on /tf_static, in
+one message (one StaticTransformBroadcaster call), and tf2 returns exactly the configured pose."""
 import unittest
 
 import numpy as np
@@ -9,12 +10,13 @@ import rostest
 import tf2_ros
 from tf2_msgs.msg import TFMessage
 
-from fr5_rl.transforms import load_static_transforms, matrix_from_quaternion
+from fr5_rl.ros.static_transforms import config_files
+from fr5_rl.transforms import load_transform_files, matrix_from_quaternion
 
 
 class TestStaticTransforms(unittest.TestCase):
     def test_config_on_tf_static(self):
-        entries = load_static_transforms()
+        entries = load_transform_files(config_files(rospy.get_param("/static_transforms/config", "static_transforms")))
         self.assertGreaterEqual(len(entries), 1)
         message = rospy.wait_for_message("/tf_static", TFMessage, timeout=20.0)
         published = {(t.header.frame_id, t.child_frame_id) for t in message.transforms}

@@ -3,7 +3,8 @@
 a CameraInfo of one size, stamped alike, in the optical frame; the detector's /target_pose is in
 that frame (or the tcp frame, for an object held in the gripper) with an image's stamp, and
 lies within 5 mm of the simulator's true object centre of the same instant (ground truth on
-/fr5_sim/object)."""
+/fr5_sim/object). The optical frame has one parent, camera_color_frame (the camera's own chain,
+as realsense2_camera publishes it; the project publishes only the mount)."""
 import unittest
 
 import numpy as np
@@ -12,6 +13,7 @@ import rostest
 import tf2_ros
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import CameraInfo, Image
+from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker
 
 from fr5_rl.transforms import matrix_from_quaternion
@@ -26,6 +28,14 @@ class TestVisionTopics(unittest.TestCase):
         self.assertEqual({(m.width, m.height) for m in (color, depth, info)}, {(info.width, info.height)})
         self.assertEqual({m.header.frame_id for m in (color, depth, info)}, {"camera_color_optical_frame"})
         self.assertGreater(info.K[0], 0.0)
+
+        # Every latched /tf_static publisher delivers its transforms to a new subscriber.
+        parents = {}
+        rospy.Subscriber("/tf_static", TFMessage, lambda m: [parents.setdefault(t.child_frame_id, set()).add(
+            t.header.frame_id) for t in m.transforms], queue_size=50)
+        rospy.sleep(2.0)
+        self.assertEqual(parents.get("camera_color_optical_frame"), {"camera_color_frame"})
+        self.assertEqual(parents.get("camera_color_frame"), {"camera_link"})
 
         truths = {}
         rospy.Subscriber("/fr5_sim/object", Marker, lambda m: truths.__setitem__(m.header.stamp.to_nsec(), m),

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 from ..config import ConfigError
-from ..runtime.bundle import EVAL_FILE, ModelFilesError
+from ..deploy.bundle import EVAL_FILE, ModelFilesError
 from ..training.evaluation import HELD_OUT_SEED_START
 from . import fail, script_args
 
@@ -79,7 +79,7 @@ def evaluate(args: argparse.Namespace) -> int:
             expert = ScriptedExpert(env)
             return expert.act, expert.reset
     else:
-        from ..runtime.policy import load_policy
+        from ..deploy.policy import load_policy
 
         policy = load_policy(args.model_dir, args.backend)
         task, label, meta = policy.task, str(args.model_dir), policy.meta
@@ -115,7 +115,7 @@ def evaluate(args: argparse.Namespace) -> int:
     csv_path = args.csv or out.with_suffix(".csv")
     write_results(summary, records, out, csv_path)
     if not args.no_map:
-        from ..config import load_env_config
+        from ..env_config import load_env_config
         from ..training.success_map import write_success_map
 
         maps = write_success_map(records, load_env_config(overrides), out.with_name(out.stem + "_map"),

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import List, Optional
 
 from ..config import ConfigError
-from ..runtime.bundle import ModelFilesError
+from ..deploy.bundle import ModelFilesError
 from . import fail, script_args
 
 def build_parser() -> argparse.ArgumentParser:

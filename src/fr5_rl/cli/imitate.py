@@ -10,7 +10,8 @@ from pathlib import Path
 from typing import List, Optional
 
 from ..config import ConfigError
-from ..runtime.bundle import ModelFilesError
+from ..deploy.bundle import ModelFilesError
+from ..training.run_settings import DaggerRun
 from . import fail, script_args
 
 
@@ -30,11 +31,18 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def dagger_run(args: argparse.Namespace) -> DaggerRun:
+    """The command line's options as a :class:`DaggerRun`."""
+    return DaggerRun(task=args.task, hyperparams=args.hyperparams, run_dir=args.run_dir, seed=args.seed,
+                     rounds=args.rounds, episodes=args.episodes, epochs=args.epochs,
+                     eval_episodes=args.eval_episodes, torch_threads=args.torch_threads)
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     args = build_parser().parse_args(script_args(argv))
     from ..training.imitation import run_dagger
 
     try:
-        return run_dagger(args)
+        return run_dagger(dagger_run(args))
     except (ConfigError, ModelFilesError) as error:
         return fail("imitate.py", error)

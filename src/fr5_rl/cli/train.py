@@ -9,12 +9,14 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import copy
 import time
 from pathlib import Path
-from typing import List, Optional
+from typing import List, Optional, Set
 
 from ..config import ConfigError
-from ..runtime.bundle import ModelFilesError
+from ..deploy.bundle import ModelFilesError
+from ..training.run_settings import TrainRun, read_run_config
 from . import fail, script_args
 
 
@@ -52,13 +54,41 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# Options whose TrainRun field has another name (the rest are the same).
+FIELD_OF_OPTION = {"no_subprocess": "subprocess", "no_progress": "progress"}
+
+
+def typed_options(parser: argparse.ArgumentParser, argv: List[str]) -> Set[str]:
+    """The options ``argv`` gives (by their ``dest``), whatever their values: ``argv`` parsed
+    again with every default suppressed, so only what was typed lands in the namespace."""
+    quiet = copy.deepcopy(parser)
+    for action in quiet._actions:  # (argparse has no public way to reach every action's default)
+        action.default = argparse.SUPPRESS
+    return set(vars(quiet.parse_args(argv)))
+
+
+def train_run(args: argparse.Namespace) -> TrainRun:
+    """The command line's options as a :class:`TrainRun`."""
+    return TrainRun(task=args.task, algo=args.algo, hyperparams=args.hyperparams, n_envs=args.n_envs, seed=args.seed,
+                    timesteps=args.timesteps, run_dir=args.run_dir, resume=args.resume, init_from=args.init_from,
+                    checkpoint_freq=args.checkpoint_freq, eval_freq=args.eval_freq, eval_episodes=args.eval_episodes,
+                    target_success=args.target_success, stop_at_success=args.stop_at_success,
+                    eval_min_training_success=args.eval_min_training_success, subprocess=not args.no_subprocess,
+                    processes=args.processes, progress=not args.no_progress, torch_threads=args.torch_threads)
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     t_start = time.time()
     parser = build_parser()
-    args = parser.parse_args(script_args(argv))
+    argv = script_args(argv)
+    args = parser.parse_args(argv)
     from ..training.train import train  # after parsing: --help stays fast
 
     try:
-        return train(args, t_start, vars(parser.parse_args([])))
+        run = train_run(args)
+        if run.resume:  # the run's config.json, but for the options typed again
+            typed_again = {FIELD_OF_OPTION.get(dest, dest) for dest in typed_options(parser, argv)}
+            run = run.resumed(read_run_config(run.run_dir), typed_again)
+        return train(run, t_start)
     except (ConfigError, ModelFilesError) as error:
         return fail("train.py", error)

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import List, Optional
 
 from ..config import ConfigError
-from ..runtime.bundle import ModelFilesError
+from ..deploy.bundle import ModelFilesError
 from . import fail, script_args
 
 
@@ -57,7 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Optional[List[str]] = None) -> int:
     parser = build_parser()
     args = parser.parse_args(script_args(argv))
-    from ..training.tune import TuneExperiment, build_settings  # after parsing: --help stays fast
+    from ..training.tune.experiment import TuneExperiment  # after parsing: --help stays fast
+    from ..training.tune.settings import build_settings
 
     try:
         if args.resume is not None:

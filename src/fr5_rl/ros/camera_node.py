@@ -2,11 +2,13 @@
 
 It keeps its own render-only PyBullet world (:class:`fr5_rl.sim.camera.SimulatedCamera`) in its
 own process, so rendering never stalls the simulator's ``/joint_states`` or the policy's
-commands. It mirrors the simulator: the joints from ``~joint_states_topic`` (by name) and the
-object's true pose, size and shape from ``~object_topic`` (visualization_msgs/Marker in
-base_link, published by sim_node with every joint state). At up to ``~rate`` it renders the
-newest state and publishes, all stamped with that state's stamp (the simulated capture time)
-and in ``~frame_id`` (REP 103 optical frame):
+commands. It mirrors the simulator: the joints from ``~joint_states_topic`` (the simulator's
+ground truth; merged by name, so a topic with only some joints works) and the object's true
+pose, size and shape from ``~object_topic`` (visualization_msgs/Marker in base_link, published
+by sim_node with every joint state). At up to ``~rate`` it renders the newest state and
+publishes, all stamped with that state's stamp (the simulated capture time) and in ``~frame_id``
+(``camera_color_optical_frame``, REP 103), as realsense2_camera (ros1-legacy,
+``align_depth:=true``) does:
 
 - ``~color_topic``: sensor_msgs/Image ``rgb8``;
 - ``~depth_topic``: sensor_msgs/Image ``16UC1``, millimetres along the optical axis, 0 = no
@@ -17,8 +19,12 @@ and in ``~frame_id`` (REP 103 optical frame):
 Per frame, ``~timing`` (std_msgs/Float64MultiArray) gives the seconds spent rendering, converting
 and publishing, and the rendered state's age when the frame was published.
 
-The camera's pose is config/static_transforms.yaml's ``~frame_id`` in ``~base_frame``. The
-default topics are the RealSense driver's. Parameters: ``config/camera.yaml``.
+Frames, as the wrapper's: the project publishes only the mount ``~base_frame`` -> camera_link
+(``~mount_config``); the camera's own chain camera_link -> camera_color_frame ->
+camera_color_optical_frame (and camera_aligned_depth_to_color_frame) is ``~frames_config``. With
+``~publish_tf`` true (the wrapper's default) this node publishes that chain on /tf_static; with
+false the launch must (static_transforms_node.py). Either way the picture is taken from
+``~frame_id``'s pose through both files, read once at start. Parameters: ``config/camera.yaml``.
 """
 from __future__ import annotations
 
@@ -26,20 +32,55 @@ import threading
 import time
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Dict, Optional, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import rospy
+import tf2_ros
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import Marker
 
-from ..config import ConfigError, load_env_config, load_robot_spec
-from ..runtime.pinhole import Intrinsics, IntrinsicsError
+from ..config import ConfigError, load_robot_spec
+from ..env_config import load_env_config
+from ..perception.camera_model import Intrinsics, IntrinsicsError
 from ..sim.camera import RENDERERS, SimulatedCamera, depth_to_millimetres
-from ..transforms import load_static_transforms, transform_in
+from ..transforms import load_transform_files, transform_in
 from .images import camera_info_message, image_message
 from .params import exit_if_help_asked, node_parameters
+from .static_transforms import to_messages
+
+
+class JointStateHistory:
+    """Recent joint states by stamp, each merged by name over the ones before it, so the camera
+    poses every joint it has ever heard of even when a message carries only some.
+
+    :param length: how many stamps to keep (a few frame periods of the simulator's 200 Hz).
+    """
+
+    def __init__(self, length: int) -> None:
+        self.length = length
+        self.states: "OrderedDict[int, Dict[str, float]]" = OrderedDict()
+
+    def add(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> None:
+        """Take one message.
+
+        :param stamp_ns: its header stamp (ns).
+        :param positions: by ``names`` (rad; m for the fingers).
+        """
+        merged = dict(next(reversed(self.states.values()))) if self.states else {}
+        merged.update(zip(names, positions))
+        self.states[stamp_ns] = merged
+        self.states.move_to_end(stamp_ns)
+        while len(self.states) > self.length:
+            self.states.popitem(last=False)
+
+    def at(self, stamp_ns: int) -> Optional[Tuple[int, Dict[str, float]]]:
+        """(stamp ns, joints) of ``stamp_ns`` (ns) if held, else the newest; None before any."""
+        if not self.states:
+            return None
+        joints = self.states.get(stamp_ns)
+        return (stamp_ns, joints) if joints is not None else next(reversed(self.states.items()))
 
 
 @dataclass(frozen=True)
@@ -60,12 +101,29 @@ class CameraNodeParams:
     seed: int
     frame_id: str
     base_frame: str
+    publish_tf: bool
+    mount_config: str
+    frames_config: str
     joint_states_topic: str
     object_topic: str
     color_topic: str
     depth_topic: str
     camera_info_topic: str
     depth_camera_info_topic: str
+
+    def transforms(self) -> Tuple[np.ndarray, List[Dict]]:
+        """Read the frames once: ``~frame_id``'s pose in ``~base_frame`` (4x4, m), the mount and
+        then the camera's chain, the same transforms tf carries, so the picture is taken where
+        tf says it is; and the chain's entries (``~frames_config``), for /tf_static.
+
+        :raises ConfigError: a file is wrong, a frame has a parent in both files, the chain does
+            not give ``frame_id`` a parent, or the files do not connect it to ``base_frame``.
+        """
+        entries = load_transform_files([self.mount_config, self.frames_config])
+        frames = [entry for entry in entries if entry["source"] == self.frames_config]
+        if self.frame_id not in {entry["child"] for entry in frames}:
+            raise ConfigError(f"{self.frames_config}: no transform to the camera's frame_id {self.frame_id}")
+        return transform_in(entries, self.base_frame, self.frame_id), frames
 
     def intrinsics(self) -> Intrinsics:
         """The pinhole model these parameters describe (raises IntrinsicsError if invalid)."""
@@ -89,8 +147,8 @@ class CameraNode:
         self.params = params = node_parameters(CameraNodeParams, "camera")
         self.intrinsics = params.intrinsics()
         spec = load_robot_spec()
-        arguments = (load_env_config(), list(spec.joint_names) + list(spec.finger_joint_names),
-                     transform_in(load_static_transforms(), params.base_frame, params.frame_id),
+        render_pose, camera_frames = params.transforms()
+        arguments = (load_env_config(), list(spec.joint_names) + list(spec.finger_joint_names), render_pose,
                      self.intrinsics.opengl_projection(params.near, params.far),
                      params.width, params.height, params.near, params.far)
         try:
@@ -101,10 +159,13 @@ class CameraNode:
             # A machine without EGL still gets images, about half as fast (TinyRenderer, CPU).
             rospy.logwarn(f"camera_node: {error}; rendering with the TinyRenderer instead")
             self.camera = SimulatedCamera(*arguments, renderer="tiny")
+        if params.publish_tf:
+            # Latched; kept on self so the publisher lives as long as the node.
+            self.tf_broadcaster = tf2_ros.StaticTransformBroadcaster()
+            self.tf_broadcaster.sendTransform(to_messages(camera_frames, rospy.Time.now()))
         self.rng = np.random.default_rng(params.seed)
         self.lock = threading.Lock()
-        # Recent joint states by stamp (ns), so the object and the joints of one instant pair up.
-        self.joint_states: "OrderedDict[int, Dict[str, float]]" = OrderedDict()
+        self.joint_states = JointStateHistory(20)
         self.object: Optional[Marker] = None
         self.rendered_stamp = -1
         self.frames = 0
@@ -116,13 +177,12 @@ class CameraNode:
         rospy.Subscriber(params.joint_states_topic, JointState, self.on_joint_state, queue_size=5, tcp_nodelay=True)
         rospy.Subscriber(params.object_topic, Marker, self.on_object, queue_size=5, tcp_nodelay=True)
         rospy.loginfo(f"camera_node: {params.width}x{params.height} at up to {params.rate:g} Hz, "
-                      f"{self.camera.renderer} renderer, frame {params.frame_id}")
+                      f"{self.camera.renderer} renderer, frame {params.frame_id}, "
+                      f"{'publishing' if params.publish_tf else 'not publishing'} its tf")
 
     def on_joint_state(self, message: JointState) -> None:
         with self.lock:
-            self.joint_states[message.header.stamp.to_nsec()] = dict(zip(message.name, message.position))
-            while len(self.joint_states) > 20:
-                self.joint_states.popitem(last=False)
+            self.joint_states.add(message.header.stamp.to_nsec(), message.name, message.position)
 
     def on_object(self, message: Marker) -> None:
         with self.lock:
@@ -131,13 +191,10 @@ class CameraNode:
     def snapshot(self) -> Optional[Tuple[int, Dict[str, float], Marker]]:
         """The newest object pose and the joint state of the same stamp (or the newest one)."""
         with self.lock:
-            if self.object is None or not self.joint_states:
+            if self.object is None:
                 return None
-            stamp = self.object.header.stamp.to_nsec()
-            joints = self.joint_states.get(stamp)
-            if joints is None:
-                stamp, joints = next(reversed(self.joint_states.items()))
-            return stamp, joints, self.object
+            state = self.joint_states.at(self.object.header.stamp.to_nsec())
+            return None if state is None else (state[0], state[1], self.object)
 
     def spin(self) -> None:
         """Render and publish at up to ``~rate`` until shutdown; a frame is only taken of a new state."""

@@ -2,16 +2,17 @@
 
 It subscribes to colour, aligned depth and the colour CameraInfo, synchronised with
 message_filters (``~sync_slop``), and hands each frame to
-:class:`fr5_rl.runtime.detection.ObjectDetector` with the camera's pose over the table from tf2
+:class:`fr5_rl.perception.detector.ObjectDetector` with the camera's pose over the table from tf2
 (``~table_frame`` <- the image's frame). It needs no knowledge of the object's colour: it looks
 for the one thing standing on the table inside the placement region (config/env.yaml).
 
 - a detection: geometry_msgs/PoseStamped of the object centre on ``~target_topic``, in the
   image's optical frame, with the image's stamp (orientation: the table's, upright);
 - the object hidden by the robot while it goes down around it, or held in its fingers: the
-  position :class:`fr5_rl.runtime.detection.ObjectTracker` keeps (the last seen one, for
-  ``~hidden_timeout``; the tcp's pose from tf times the grasp offset while the fingers, from
-  ``~joint_states_topic``, are closed on it), stamped with the new image; ``~track_state``
+  position :class:`fr5_rl.perception.tracker.ObjectTracker` keeps (the last seen one, for
+  ``~tracker/hidden_timeout``; the tcp's pose from tf times the grasp offset while the fingers, from
+  ``~joint_states_topics`` merged by joint name (e.g. the arm driver's and the gripper bridge's),
+  are closed on it), stamped with the new image; ``~track_state``
   (std_msgs/String) says which: ``seen``, ``hidden``, ``in hand`` or ``holding: <why>``;
 - no detection (nothing, several candidates, the object hidden too long or gone) or bad input
   (image sizes that differ, an unknown encoding, a missing or zero CameraInfo, depth that is
@@ -23,7 +24,8 @@ Every frame also goes to ``~debug_image_topic`` (rgb8) with the detection drawn 
 yellow: hidden, blue: in the hand; a red frame when there is none), and per-frame compute times
 to ``~timing`` (Float64MultiArray: decode, detect, track, total, all seconds; and the image's
 age when the frame arrived). The default topics are the RealSense driver's, so on a real camera the
-node runs as it is. Parameters: ``config/detector.yaml``.
+node runs as it is. Parameters: ``config/detector.yaml``; its ``detector`` and ``tracker``
+sections go whole to the detector and the tracker (``~detector/min_height`` sets one of them).
 """
 from __future__ import annotations
 
@@ -31,7 +33,7 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
-from typing import Deque, List, Optional, Tuple, Union
+from typing import Deque, List, Optional, Sequence, Tuple, Union
 
 import message_filters
 import numpy as np
@@ -41,11 +43,14 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Float64MultiArray, String
 
-from ..config import ConfigError, load_env_config, load_robot_spec
-from ..runtime.detection import (Detection, DetectorSettings, InputError, ObjectDetector, ObjectTracker, Refusal,
-                                 RefusalReason, TrackedObject, TrackerSettings, TrackState, check_frame, decode_color,
-                                 decode_depth, draw_detection, intrinsics_from_camera_info)
-from ..runtime.pinhole import Intrinsics
+from ..config import ConfigError, load_robot_spec
+from ..deploy.joint_state import JointStateReader
+from ..env_config import load_env_config
+from ..perception.camera_model import Intrinsics
+from ..perception.detector import Detection, DetectorSettings, ObjectDetector, Refusal, RefusalReason, TableRegion
+from ..perception.images import InputError, check_frame, decode_color, decode_depth, intrinsics_from_camera_info
+from ..perception.overlay import draw_detection
+from ..perception.tracker import ObjectTracker, TrackedObject, TrackerSettings, TrackState
 from ..transforms import matrix_from_quaternion, quaternion_from_matrix
 from .images import image_message
 from .params import exit_if_help_asked, node_parameters
@@ -56,7 +61,18 @@ TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.Ext
 
 @dataclass(frozen=True)
 class DetectorNodeParams:
-    """``config/detector.yaml``: the detector node's ~private parameters."""
+    """``config/detector.yaml``: the detector node's ~private parameters (topics and frames in
+    the node's own docstring and the file's comments).
+
+    :param sync_slop: s; colour, depth and camera_info stamps further apart are not one frame.
+    :param max_image_age: s; an older frame (by stamp) is refused.
+    :param startup_grace: wall s after start in which missing hand inputs (tf, finger joint
+        states) are still expected to come, not yet worth a warning.
+    :param detector: the detector's thresholds, handed to it whole.
+    :param tracker: the tracker's settings, handed to it whole.
+    :param joint_states_topics: sensor_msgs/JointState topics merged by joint name for the finger
+        joints (the arm's driver and a gripper driver may publish apart).
+    """
 
     color_topic: str
     depth_topic: str
@@ -66,69 +82,64 @@ class DetectorNodeParams:
     table_frame: str
     sync_slop: float
     max_image_age: float
-    region_margin: float
-    min_height: float
-    max_object_height: float
-    top_tolerance: float
-    object_height: float
-    min_area: float
-    max_area: float
-    robot_margin_px: int
-    min_valid_depth_fraction: float
-    hidden_timeout: float
-    in_hand_timeout: float
-    max_table_fraction: float
-    front_tolerance: float
-    grasp_radius: float
-    grasp_width_margin: float
-    min_grasp_fraction: float
-    closing_tolerance: float
-    closing_axis: List[float]
-    gate_height: float
-    gate_size: float
-    nudge_radius: float
-    nudge_step: float
+    startup_grace: float
+    detector: DetectorSettings
+    tracker: TrackerSettings
     tcp_frame: str
-    joint_states_topic: str
+    joint_states_topics: List[str]
     track_state_topic: str
 
     def check(self, source: str) -> None:
         if self.sync_slop <= 0 or self.max_image_age <= 0:
             raise ConfigError(f"{source}: sync_slop and max_image_age must be > 0")
-        if min(self.hidden_timeout, self.in_hand_timeout, self.front_tolerance, self.grasp_radius,
-               self.grasp_width_margin, self.min_grasp_fraction, self.nudge_radius) < 0 \
-                or self.nudge_step <= 0 or not 0 <= self.max_table_fraction <= 1:
-            raise ConfigError(f"{source}: the tracking parameters must be >= 0 and max_table_fraction in [0, 1] "
-                              "(hidden_timeout 0 switches tracking off), nudge_step > 0")
-        if len(self.closing_axis) != 3 or not np.linalg.norm(self.closing_axis) > 0:
-            raise ConfigError(f"{source}: closing_axis must be a non-zero 3-vector (the fingers' direction in "
-                              f"the tcp frame), got {self.closing_axis}")
-        if not 0 <= self.min_height < self.max_object_height or not 0 < self.min_area < self.max_area:
-            raise ConfigError(f"{source}: needs 0 <= min_height < max_object_height and 0 < min_area < max_area")
+        if not self.joint_states_topics or len(set(self.joint_states_topics)) != len(self.joint_states_topics):
+            raise ConfigError(f"{source}: joint_states_topics must list one or more topics, each once")
 
 
-def settings_from(params: DetectorNodeParams) -> DetectorSettings:
-    """The detector's settings: config/detector.yaml's thresholds, env.yaml's table and region."""
-    env = load_env_config()
-    return DetectorSettings(
-        region_low=tuple(float(v) for v in env["object"]["region_low"]),
-        region_high=tuple(float(v) for v in env["object"]["region_high"]),
-        region_margin=params.region_margin, table_height=float(env["table"]["top_height"]),
-        min_height=params.min_height, max_object_height=params.max_object_height,
-        top_tolerance=params.top_tolerance, object_height=params.object_height, min_area=params.min_area,
-        max_area=params.max_area, robot_margin_px=params.robot_margin_px,
-        min_valid_depth_fraction=params.min_valid_depth_fraction)
+class FingerWidths:
+    """The gripper's opening (m, the sum of the finger joints) by stamp, from joint-state messages
+    of one or several topics merged by joint name (:class:`JointStateReader`).
 
+    A message that names a finger joint adds the merged opening, stamped with the oldest header
+    stamp among the finger joints; others (the arm driver's j1..j6) add nothing. One topic that
+    carries every joint gives exactly each message's own stamp and finger sum.
 
-def tracker_settings_from(params: DetectorNodeParams) -> TrackerSettings:
-    """The tracker's settings from config/detector.yaml."""
-    return TrackerSettings(hidden_timeout=params.hidden_timeout, in_hand_timeout=params.in_hand_timeout,
-                           max_table_fraction=params.max_table_fraction, front_tolerance=params.front_tolerance,
-                           grasp_radius=params.grasp_radius, grasp_width_margin=params.grasp_width_margin,
-                           min_grasp_fraction=params.min_grasp_fraction, closing_tolerance=params.closing_tolerance,
-                           closing_axis=tuple(params.closing_axis), gate_height=params.gate_height,
-                           gate_size=params.gate_size, nudge_radius=params.nudge_radius,
-                           nudge_step=params.nudge_step)
+    :param finger_names: the finger joints (config/robot.yaml).
+    :param length: how many openings to keep (about 2 s of a 200 Hz topic).
+    """
+
+    def __init__(self, finger_names: Sequence[str], length: int) -> None:
+        self.finger_names = frozenset(finger_names)
+        # The fingers stand in for the reader's "arm": it then wants every finger and nothing else.
+        self.reader = JointStateReader(finger_names, finger_names)
+        self.widths: Deque[Tuple[float, float]] = deque(maxlen=length)
+        self.lock = threading.Lock()
+
+    def add(self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float],
+            stamp: float, received: float) -> None:
+        """Take one message.
+
+        :param positions: by ``names`` (rad; m for the fingers).
+        :param stamp: its header stamp (s).
+        :param received: arrival time (s, monotonic).
+        """
+        with self.lock:
+            if self.reader.update(names, positions, velocities, stamp, received) is not None:
+                return  # refused by the reader (NaN, a name twice, arrays that do not fit)
+            if self.finger_names.isdisjoint(names):
+                return  # nothing new about the fingers
+            reading = self.reader.reading()
+            if reading is None or reading.value is None or reading.value.gripper_width is None:
+                return  # not every finger heard of yet
+            self.widths.append((reading.stamp, reading.value.gripper_width))
+
+    def at(self, stamp: float) -> Optional[float]:
+        """The opening (m) nearest ``stamp`` (s) within 0.1 s; None when unknown."""
+        with self.lock:
+            if not self.widths:
+                return None
+            nearest = min(reversed(self.widths), key=lambda entry: abs(entry[0] - stamp))
+        return nearest[1] if abs(nearest[0] - stamp) <= 0.1 else None
 
 
 class DetectorNode:
@@ -136,16 +147,15 @@ class DetectorNode:
 
     def __init__(self) -> None:
         self.params = params = node_parameters(DetectorNodeParams, "detector")
-        settings = settings_from(params)
-        self.detector = ObjectDetector(settings)
-        self.tracker = ObjectTracker(tracker_settings_from(params), settings)
+        table = TableRegion.from_env(load_env_config())  # the table and the placement region: env.yaml's
+        self.detector = ObjectDetector(params.detector, table)
+        self.tracker = ObjectTracker(params.tracker, params.detector, table)
         self.last_refusal: Optional[RefusalReason] = None
         self.last_track: Optional[TrackState] = None
-        self.finger_names = load_robot_spec().finger_joint_names
-        # (stamp s, opening m) of recent joint states, to read the opening at an image's stamp.
-        self.widths: Deque[Tuple[float, float]] = deque(maxlen=400)
-        self.widths_lock = threading.Lock()
+        # Recent openings by stamp, to read the opening at an image's stamp.
+        self.widths = FingerWidths(load_robot_spec().finger_joint_names, 400)
         self.warned_no_hand = False
+        self.started = time.monotonic()
         self.table_from_optical: Optional[np.ndarray] = None  # of the last frame tf could place
         self.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
@@ -153,7 +163,8 @@ class DetectorNode:
         self.debug_pub = rospy.Publisher(params.debug_image_topic, Image, queue_size=1)
         self.state_pub = rospy.Publisher(params.track_state_topic, String, queue_size=1)
         self.timing_pub = rospy.Publisher("~timing", Float64MultiArray, queue_size=10)
-        rospy.Subscriber(params.joint_states_topic, JointState, self.on_joint_state, queue_size=10, tcp_nodelay=True)
+        for topic in params.joint_states_topics:
+            rospy.Subscriber(topic, JointState, self.on_joint_state, queue_size=10, tcp_nodelay=True)
         # Images are large: rospy's default receive buffer would queue them behind each other.
         # One deep: when the detector falls behind, the newest frame is the one worth detecting.
         subscribers = [message_filters.Subscriber(topic, kind, queue_size=1, buff_size=1 << 24, tcp_nodelay=True)
@@ -171,21 +182,9 @@ class DetectorNode:
                       f"-> {params.target_topic}")
 
     def on_joint_state(self, message: JointState) -> None:
-        """Keep the fingers' opening (m, the sum of the finger joints) by stamp."""
-        try:
-            width = sum(message.position[message.name.index(name)] for name in self.finger_names)
-        except (ValueError, IndexError):
-            return  # a message without the fingers (e.g. the arm driver's)
-        with self.widths_lock:
-            self.widths.append((message.header.stamp.to_sec(), float(width)))
-
-    def width_at(self, stamp: float) -> Optional[float]:
-        """The fingers' opening (m) nearest ``stamp`` (s) within 0.1 s; None when unknown."""
-        with self.widths_lock:
-            if not self.widths:
-                return None
-            nearest = min(reversed(self.widths), key=lambda entry: abs(entry[0] - stamp))
-        return nearest[1] if abs(nearest[0] - stamp) <= 0.1 else None
+        """Keep the fingers' opening by stamp (any of ``~joint_states_topics``)."""
+        self.widths.add(message.name, message.position, message.velocity, message.header.stamp.to_sec(),
+                        time.monotonic())
 
     def tcp_at(self, stamp: rospy.Time) -> Optional[np.ndarray]:
         """The tcp's pose (4x4, m) in the table frame at ``stamp``, or the newest one; None without tf."""
@@ -229,7 +228,7 @@ class DetectorNode:
             stamp = color.header.stamp
             decoded = time.perf_counter()
             result = check_frame(rgb, depth_m, intrinsics, stamp.to_sec(), rospy.Time.now().to_sec(),
-                                 self.params.max_image_age, self.params.min_valid_depth_fraction)
+                                 self.params.max_image_age, self.params.detector.min_valid_depth_fraction)
             if result is None:
                 result = self.detect(rgb, depth_m, intrinsics, color)
             detected = time.perf_counter()
@@ -253,10 +252,11 @@ class DetectorNode:
         :param stamp: the frame's capture time.
         """
         tcp = self.tcp_at(stamp)
-        width = self.width_at(stamp.to_sec())
-        if (tcp is None or width is None) and not self.warned_no_hand:
+        width = self.widths.at(stamp.to_sec())
+        if (tcp is None or width is None) and not self.warned_no_hand \
+                and time.monotonic() - self.started > self.params.startup_grace:
             missing = (f"tf {self.params.table_frame} <- {self.params.tcp_frame} (robot_state_publisher?)"
-                       if tcp is None else f"finger joints on {self.params.joint_states_topic} (gripper driver?)")
+                       if tcp is None else f"finger joints on {', '.join(self.params.joint_states_topics)} (gripper driver?)")
             rospy.logwarn(f"detector_node: no {missing}: an object held in the gripper cannot be followed, only a "
                           "hidden one held at its last position; publish it to follow grasped objects")
             self.warned_no_hand = True

@@ -5,7 +5,7 @@ import numpy as np
 import rospy
 from sensor_msgs.msg import CameraInfo, Image
 
-from ..runtime.pinhole import Intrinsics
+from ..perception.camera_model import Intrinsics
 
 
 def image_message(array: np.ndarray, encoding: str, stamp: rospy.Time, frame_id: str) -> Image:

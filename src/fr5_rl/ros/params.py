@@ -1,11 +1,11 @@
 """~private parameters of a node, typed, with their defaults from config/<node>.yaml only."""
 from __future__ import annotations
 
-from typing import Type, TypeVar
+from typing import Any, Iterator, Mapping, Tuple, Type, TypeVar
 
 import rospy
 
-from ..config import ConfigError, load_yaml, typed
+from ..config import ConfigError, deep_update, load_yaml, typed
 
 T = TypeVar("T")
 
@@ -14,7 +14,9 @@ def node_parameters(cls: Type[T], config_name: str) -> T:
     """``config/<config_name>.yaml`` overridden by the node's ~private parameters, as ``cls``.
 
     A ~private parameter the file does not know (a typo in a launch file) is refused, as is a
-    value of the wrong type; the error names the parameter.
+    value of the wrong type; the error names the parameter. A section of the file (a mapping,
+    e.g. ``detector:``) is a nested parameter: ``~detector/min_height`` overrides that one key,
+    the others keep the file's values.
     """
     defaults = load_yaml(config_name)
     private = rospy.get_name().rstrip("/") + "/"
@@ -23,8 +25,25 @@ def node_parameters(cls: Type[T], config_name: str) -> T:
     if unknown:
         raise ConfigError(f"unknown parameter ~{unknown[0]}; {rospy.get_name()} takes: {', '.join(defaults)} "
                           f"(defaults in config/{config_name}.yaml)")
-    values = {key: rospy.get_param(f"~{key}", value) for key, value in defaults.items()}
+    values = {key: _merged(value, rospy.get_param(f"~{key}", value)) for key, value in defaults.items()}
     return typed(cls, values, f"{rospy.get_name()} parameters (defaults: config/{config_name}.yaml)")
+
+
+def _merged(default: Any, given: Any) -> Any:
+    """A parameter's value: ``given`` as it is, or, for a section, merged key by key over the
+    file's (a key the file lacks is kept, for ``typed`` to refuse by its full name)."""
+    if isinstance(default, dict) and isinstance(given, Mapping):
+        return deep_update(default, given, strict=False)
+    return given
+
+
+def _flat(values: Mapping[str, Any], prefix: str = "") -> Iterator[Tuple[str, Any]]:
+    """``(name, value)`` of every parameter, a section's keys as ``section/key``."""
+    for key, value in values.items():
+        if isinstance(value, dict):
+            yield from _flat(value, f"{prefix}{key}/")
+        else:
+            yield f"{prefix}{key}", value
 
 
 def exit_if_help_asked(program: str, summary: str, config_name: str = "") -> None:
@@ -38,6 +57,6 @@ def exit_if_help_asked(program: str, summary: str, config_name: str = "") -> Non
     if config_name:
         lines += ["", f"~private parameters (defaults: config/{config_name}.yaml):"]
         lines += [f"  _{key}:={str(value).lower() if isinstance(value, bool) else value}"
-                  for key, value in load_yaml(config_name).items()]
+                  for key, value in _flat(load_yaml(config_name))]
     print("\n".join(lines))
     sys.exit(0)

@@ -2,13 +2,13 @@
 
 This module is I/O only. Each control period it hands the newest joint state (read *by
 name*) and the newest target, transformed into ``base_link`` through tf2, to
-:class:`~fr5_rl.runtime.deployment.DeploymentStep` (observation, policy, action shaping, safety
+:class:`~fr5_rl.deploy.deployment.DeploymentStep` (observation, policy, action shaping, safety
 gate: the same code the environments use), then publishes what comes back:
 
-- a :class:`~fr5_rl.runtime.deployment.Command`: ``std_msgs/Float64MultiArray`` (6 values,
+- a :class:`~fr5_rl.deploy.deployment.Command`: ``std_msgs/Float64MultiArray`` (6 values,
   controller order) on the command topic, and the gripper opening width (``std_msgs/Float64``,
   m) when ``~command_gripper`` is set;
-- a :class:`~fr5_rl.runtime.deployment.Hold`: nothing, so the controller keeps its last
+- a :class:`~fr5_rl.deploy.deployment.Hold`: nothing, so the controller keeps its last
   target, and a warning (at once when the reason changes, then throttled).
 
 ``~enable`` (std_srvs/SetBool) pauses and resumes; ``~reset`` (std_srvs/Trigger) starts as an
@@ -24,6 +24,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
@@ -35,19 +36,64 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Bool, Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 from visualization_msgs.msg import Marker
 
-from ..config import ConfigError, PolicyNodeParams, load_env_config, load_robot_spec, package_root
-from ..runtime.bundle import ModelFilesError
-from ..runtime.deployment import Command, DeploymentStep, Hold, HoldReason, StepInputs
-from ..runtime.joint_state import JointStateReader, Reading
-from ..runtime.policy import load_policy
+from ..config import ConfigError, check_positive, load_robot_spec, package_root
+from ..env_config import load_env_config
+from ..deploy.bundle import ModelFilesError
+from ..deploy.deployment import Command, DeploymentStep, Hold, HoldReason, StepInputs
+from ..deploy.joint_state import JointStateReader, Reading
+from ..deploy.motion_guard import MotionGuardSettings, StartPhase
+from ..deploy.policy import load_policy
 from .params import exit_if_help_asked, node_parameters
 
 TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.ExtrapolationException,
              tf2_ros.InvalidArgumentException)
+
+
+@dataclass(frozen=True)
+class PolicyNodeParams:
+    """``config/policy_node.yaml``: the policy node's ~private parameters."""
+
+    model_dir: str
+    backend: str
+    rate: float
+    base_frame: str
+    joint_state_timeout: float
+    target_timeout: float
+    future_stamp_tolerance: float
+    target_workspace_margin: float
+    joint_states_topic: str
+    finger_joint_states_topic: str
+    joint_velocity_source: str
+    gripper_fault_topic: str
+    target_topic: str
+    command_topic: str
+    gripper_command_topic: str
+    command_gripper: bool
+    dry_run: bool
+    dry_run_topic: str
+    enabled: bool
+    sim_time_input_wait: float
+    startup_grace: float
+    start_move_timeout: float
+    motion_guard: bool
+    guard: MotionGuardSettings
+
+    def check(self, source: str) -> None:
+        if self.joint_velocity_source not in ("driver", "positions"):
+            raise ConfigError(f"{source}: 'joint_velocity_source' must be driver or positions, "
+                              f"got {self.joint_velocity_source!r}")
+        if self.startup_grace < 0:
+            raise ConfigError(f"{source}: 'startup_grace' must be >= 0 s, got {self.startup_grace}")
+        if self.sim_time_input_wait < 0:
+            raise ConfigError(f"{source}: 'sim_time_input_wait' must be >= 0 s, got {self.sim_time_input_wait}")
+        if self.backend not in ("torch", "onnx"):
+            raise ConfigError(f"{source}: 'backend' must be torch or onnx, got {self.backend!r}")
+        check_positive(source, rate=self.rate, joint_state_timeout=self.joint_state_timeout,
+                       target_timeout=self.target_timeout, start_move_timeout=self.start_move_timeout)
 
 
 class PolicyNode:
@@ -63,17 +109,23 @@ class PolicyNode:
         env_cfg = load_env_config(policy.meta.get("env_overrides", {}))
         self.step = DeploymentStep(policy, robot, env_cfg, params.joint_state_timeout, params.target_timeout,
                                    target_workspace_margin=params.target_workspace_margin,
-                                   future_stamp_tolerance=params.future_stamp_tolerance)
+                                   future_stamp_tolerance=params.future_stamp_tolerance,
+                                   guard=params.guard if params.motion_guard else None)
         self.control_dt = self.step.control_dt
         if abs(params.rate * self.control_dt - 1.0) > 1e-6:
             raise ConfigError(f"~rate = {params.rate:g} Hz but the model was trained at {1.0 / self.control_dt:g} Hz: "
                               "the action scaling would be wrong; set ~rate to the training rate")
         self.step.enabled = params.enabled
-        self.reader = JointStateReader(robot.joint_names, robot.finger_joint_names)
+        self.reader = JointStateReader(robot.joint_names, robot.finger_joint_names,
+                                       velocities_from_positions=params.joint_velocity_source == "positions",
+                                       max_joint_speeds=(robot.velocity_limits * params.guard.glitch_speed_factor
+                                                         if params.motion_guard else None))
+        self.gripper_fault: Optional[str] = None
         self.joint_state_stamp = rospy.Time(0)
         self.target: Optional[PoseStamped] = None
         self.target_received = 0.0
         self.last_tick: Optional[float] = None
+        self.started = time.monotonic()
         self.timing: deque = deque(maxlen=500)
         # Guards self.step (timer vs. services) and signals new inputs to a waiting period.
         self.inputs_changed = threading.Condition()
@@ -82,15 +134,26 @@ class PolicyNode:
 
         self.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
-        self.command_pub = rospy.Publisher(params.command_topic, Float64MultiArray, queue_size=1)
-        self.gripper_pub = rospy.Publisher(params.gripper_command_topic, Float64, queue_size=1)
+        if params.dry_run:  # nothing goes to the arm or the gripper: the commands draw a ghost robot
+            self.ghost_pub = rospy.Publisher(params.dry_run_topic, JointState, queue_size=1)
+            self.finger_names = list(robot.finger_joint_names)
+            self.arm_names = list(robot.joint_names)
+        else:
+            self.command_pub = rospy.Publisher(params.command_topic, Float64MultiArray, queue_size=1)
+            self.gripper_pub = rospy.Publisher(params.gripper_command_topic, Float64, queue_size=1)
         self.timing_pub = rospy.Publisher("~timing", Float64MultiArray, queue_size=10)
         self.marker_pub = rospy.Publisher("~target_marker", Marker, queue_size=1)
         self.diagnostics_pub = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=1)
-        rospy.Subscriber(params.joint_states_topic, JointState, self.on_joint_state, queue_size=1, tcp_nodelay=True)
+        # The arm's driver and the gripper (its bridge) publish their joints apart; the reader
+        # merges them by name.
+        for topic in filter(None, (params.joint_states_topic, params.finger_joint_states_topic)):
+            rospy.Subscriber(topic, JointState, self.on_joint_state, queue_size=1, tcp_nodelay=True)
+        if params.gripper_fault_topic:
+            rospy.Subscriber(params.gripper_fault_topic, Bool, self.on_gripper_fault, queue_size=1)
         rospy.Subscriber(params.target_topic, PoseStamped, self.on_target, queue_size=1, tcp_nodelay=True)
         rospy.Service("~enable", SetBool, self.on_enable)
         rospy.Service("~reset", Trigger, self.on_reset)
+        rospy.Service("~go_to_start", Trigger, self.on_go_to_start)
         if self.sim_time:
             # On simulated time the period starts when /clock crosses it. rospy.Timer's sim-time
             # sleep can miss a /clock wake-up and oversleep by 0.5 s, which a lockstep simulator
@@ -119,15 +182,45 @@ class PolicyNode:
             with self.inputs_changed:
                 self.inputs_changed.notify_all()
 
+    def on_gripper_fault(self, message: Bool) -> None:
+        with self.inputs_changed:
+            self.gripper_fault = f"{self.params.gripper_fault_topic} is true" if message.data else None
+
     def on_enable(self, request) -> SetBoolResponse:
         with self.inputs_changed:
             self.step.enabled = bool(request.data)
         return SetBoolResponse(success=True, message="enabled" if self.step.enabled else "disabled")
 
     def on_reset(self, _request) -> TriggerResponse:
+        """Start as a new episode; with the motion guard, answer once the arm stands in the
+        training start distribution and the policy has it (or the start move was refused)."""
         with self.inputs_changed:
             self.step.start_episode()
-        return TriggerResponse(success=True, message="starting as a new episode")
+        if self.step.guard is None or not self.step.enabled:
+            return TriggerResponse(success=True, message="starting as a new episode")
+        return self.wait_for_start("starting as a new episode")
+
+    def on_go_to_start(self, _request) -> TriggerResponse:
+        """The slow move into the training start distribution, asked for once."""
+        if self.step.guard is None:
+            return TriggerResponse(success=False, message="this node runs without the motion guard")
+        with self.inputs_changed:
+            self.step.guard.go_to_start_asked = True
+            self.step.guard.restart()
+        return self.wait_for_start("at the training start")
+
+    def wait_for_start(self, done: str) -> TriggerResponse:
+        """Wait (wall clock, ~start_move_timeout) until the guard hands the arm to the policy."""
+        deadline = time.monotonic() + self.params.start_move_timeout
+        while time.monotonic() < deadline and not rospy.is_shutdown():
+            phase = self.step.guard.phase
+            if phase is StartPhase.RUNNING:
+                return TriggerResponse(success=True, message=done)
+            if phase is StartPhase.REFUSED and self.step.last_hold is not None:
+                return TriggerResponse(success=False, message=self.step.last_hold.detail)
+            time.sleep(0.01)
+        return TriggerResponse(success=False, message=f"not at the training start after "
+                                                      f"{self.params.start_move_timeout:g} s")
 
     def wait_for_inputs_of(self, period_start: rospy.Time) -> None:
         """On simulated time: wait (bounded, wall clock) until the joint state and the target
@@ -185,8 +278,11 @@ class PolicyNode:
                     return
                 self.last_input_stamp = joint_state.stamp
             previous_hold = self.step.last_hold
+            previous_phase = self.step.guard.phase if self.step.guard is not None else None
             result = self.step(StepInputs(time.monotonic(), joint_state, self.target_in_base(),
-                                            rospy.Time.now().to_sec()))
+                                            rospy.Time.now().to_sec(), self.gripper_fault))
+        if self.step.guard is not None and self.step.guard.phase is not previous_phase:
+            self.report_start(self.step.guard.phase, joint_state)
         if isinstance(result, Hold):
             self.report_hold(result, previous_hold)
             return
@@ -200,19 +296,37 @@ class PolicyNode:
         self.timing_pub.publish(Float64MultiArray(data=list(timing)))
 
     def publish(self, command: Command) -> None:
-        message = Float64MultiArray(data=list(command.arm_positions))
-        message.layout.dim = [MultiArrayDimension(label="j1..j6", size=6, stride=6)]
-        self.command_pub.publish(message)
-        if self.params.command_gripper:
-            self.gripper_pub.publish(Float64(data=command.gripper_width))
-        self.publish_marker(command.target_in_base)
+        if self.params.dry_run:  # the ghost robot's joint states: the command, fingers at half the width each
+            ghost = JointState(name=self.arm_names + self.finger_names,
+                               position=list(command.arm_positions) + [command.gripper_width / 2.0] * 2)
+            ghost.header.stamp = rospy.Time.now()
+            self.ghost_pub.publish(ghost)
+        else:
+            message = Float64MultiArray(data=list(command.arm_positions))
+            message.layout.dim = [MultiArrayDimension(label="j1..j6", size=6, stride=6)]
+            self.command_pub.publish(message)
+            if self.params.command_gripper:
+                self.gripper_pub.publish(Float64(data=command.gripper_width))
+        if command.target_in_base is not None:
+            self.publish_marker(command.target_in_base)
+
+    def report_start(self, phase: StartPhase, joint_state: Optional[Reading]) -> None:
+        if phase is StartPhase.MOVING and joint_state is not None and joint_state.value is not None:
+            distance, joint = self.step.guard.distance_from_start(joint_state.value.positions)
+            rospy.loginfo(f"policy_node: start move: {distance:.3f} rad from the training start on j{joint + 1}, "
+                          f"at {self.params.guard.start_speed:g} rad/s")
+        elif phase is StartPhase.RUNNING:
+            rospy.loginfo("policy_node: at the training start: the policy has the arm")
 
     def report_hold(self, hold: Hold, previous: Optional[Hold]) -> None:
-        # At once when the kind of problem changes, then at most every 2 s; a pause asked for
-        # through ~enable is no problem, said once.
-        if hold.reason is HoldReason.DISABLED:
+        # At once when the kind of problem changes, then at most every 2 s. A pause asked for
+        # through ~enable is no problem, said once; so is an input not yet come while the other
+        # nodes start (~startup_grace), which every launch goes through.
+        starting = (hold.reason in (HoldReason.NO_JOINT_STATE, HoldReason.NO_TARGET)
+                    and time.monotonic() - self.started < self.params.startup_grace)
+        if hold.reason is HoldReason.DISABLED or starting:
             if previous is None or previous.reason != hold.reason:
-                rospy.loginfo(f"policy_node: {hold}")
+                rospy.loginfo(f"policy_node: {'waiting: ' if starting else ''}{hold}")
         elif previous is None or previous.reason != hold.reason:
             rospy.logwarn(f"policy_node: holding: {hold}")
         else:

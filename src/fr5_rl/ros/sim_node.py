@@ -43,23 +43,87 @@ import json
 import threading
 import time
 from collections import deque
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, List, Optional, Sequence, Tuple
+from typing import List, Optional, Tuple
 
 import numpy as np
 import rospy
-from geometry_msgs.msg import Point, PoseStamped
+from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import Trigger, TriggerResponse
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..config import ConfigError, SimNodeParams, whole_multiple
-from ..envs import EpisodeVerdict, FR5Env, JointStates, Pose, SceneDescription
+from ..config import ConfigError, check_positive, whole_multiple
+from ..envs import EpisodeVerdict, FR5Env, JointStates
+from ..sim.controller_emulator import ControllerEmulator, ControllerEmulatorSettings
+from ..sim.pacing import AlignedStepSchedule, StepSchedule, TimeSchedule, WallClockPacer
 from ..sim.servo import ServoCycle
 from ..transforms import load_static_transforms, matrix_from_quaternion, quaternion_from_matrix, transform_in
 from .params import exit_if_help_asked, node_parameters
+from .sim_messages import joint_state_message, object_marker, scene_markers
+
+
+@dataclass(frozen=True)
+class SimNodeParams:
+    """``config/sim_node.yaml``: the simulator node's ~private parameters."""
+
+    task: str
+    seed: int
+    episodes: int
+    publish_rate: float
+    physics_dt: float
+    solver_iterations: int
+    camera_rate: float
+    camera_frame: str
+    camera_noise_std: float
+    marker_rate: float
+    pause_between_episodes: float
+    reset_settle_time: float
+    joint_states_topic: str
+    publish_velocities: bool
+    truth_joint_states_topic: str
+    command_topic: str
+    gripper_interface: str
+    gripper_command_topic: str
+    controller_port: int
+    controller_emulator: ControllerEmulatorSettings
+    target_topic: str
+    publish_target: bool
+    object_topic: str
+    publish_finger_joints: bool
+    servo_rate: float
+    servo_delay_cycles: int
+    lockstep: bool
+    lockstep_command_timeout: float
+    lockstep_gripper: bool
+    policy_reset_service: str
+    episode_start: str
+    outcome_log: str
+
+    def check(self, source: str) -> None:
+        if self.servo_rate < 0 or self.servo_delay_cycles < 0:
+            raise ConfigError(f"{source}: servo_rate and servo_delay_cycles must be >= 0 (0: no servo cycle)")
+        check_positive(source, lockstep_command_timeout=self.lockstep_command_timeout)
+        if self.gripper_interface not in ("topic", "xmlrpc"):
+            raise ConfigError(f"{source}: 'gripper_interface' must be topic or xmlrpc, got {self.gripper_interface!r}")
+        if self.gripper_interface == "xmlrpc" and self.lockstep:
+            raise ConfigError(f"{source}: 'gripper_interface: xmlrpc' runs in real time only (the XML-RPC path "
+                              "is asynchronous); set ~lockstep false")
+        if self.episode_start not in ("reset", "go_to_start"):
+            raise ConfigError(f"{source}: 'episode_start' must be reset or go_to_start, got {self.episode_start!r}")
+        if self.episode_start == "go_to_start" and (self.lockstep or not self.policy_reset_service):
+            raise ConfigError(f"{source}: 'episode_start: go_to_start' needs real time and a policy_reset_service "
+                              "(the policy node's start move begins each episode)")
+        if self.task not in ("reach", "grasp"):
+            raise ConfigError(f"{source}: 'task' must be reach or grasp, got {self.task!r}")
+        check_positive(source, publish_rate=self.publish_rate, physics_dt=self.physics_dt, camera_rate=self.camera_rate,
+                  marker_rate=self.marker_rate, solver_iterations=self.solver_iterations)
+        if min(self.episodes, self.camera_noise_std, self.pause_between_episodes, self.reset_settle_time) < 0:
+            raise ConfigError(f"{source}: episodes, camera_noise_std, pause_between_episodes and reset_settle_time "
+                              "must be >= 0")
 
 
 class SimulatorNode:
@@ -107,6 +171,13 @@ class SimulatorNode:
             self.outcome_log.parent.mkdir(parents=True, exist_ok=True)
         self.reset_policy = (rospy.ServiceProxy(params.policy_reset_service, Trigger)
                              if params.policy_reset_service else None)
+        # gripper_interface xmlrpc: the FR5 controller's gripper methods on loopback, as the gripper
+        # bridge finds them on the real controller; the fingers follow what it was told.
+        self.controller: Optional[ControllerEmulator] = None
+        if params.gripper_interface == "xmlrpc":
+            self.controller = ControllerEmulator(params.controller_emulator, params.controller_port, time.monotonic)
+            self.controller.start()
+            rospy.loginfo(f"sim_node: the FR5 controller's gripper methods at {self.controller.url}")
 
         # ---- episode state, shared with the callbacks under the lock
         self.lock = threading.Lock()
@@ -123,9 +194,14 @@ class SimulatorNode:
         self.holding = True  # between episodes: commands are ignored until the next one starts
         self.hold_until = 0.0
         self.settling = False  # the new scene is placed, the policy not yet told (~reset_settle_time)
+        # episode_start go_to_start: the policy node's start move runs (commands obeyed, the
+        # episode not yet timed) until its ~reset answers.
+        self.positioning = False
 
         # ---- ROS interfaces
         self.joint_pub = rospy.Publisher(params.joint_states_topic, JointState, queue_size=10)
+        self.truth_pub = (rospy.Publisher(params.truth_joint_states_topic, JointState, queue_size=10)
+                          if params.truth_joint_states_topic else None)
         self.target_pub = (rospy.Publisher(params.target_topic, PoseStamped, queue_size=10)
                            if params.publish_target else None)
         self.object_pub = (rospy.Publisher(params.object_topic, Marker, queue_size=10)
@@ -135,8 +211,9 @@ class SimulatorNode:
         self.clock_pub = rospy.Publisher("/clock", Clock, queue_size=1) if params.lockstep else None
         self.command_sub = rospy.Subscriber(params.command_topic, Float64MultiArray, self._on_arm_command,
                                             queue_size=1, tcp_nodelay=True)
-        rospy.Subscriber(params.gripper_command_topic, Float64, self._on_gripper_command, queue_size=1,
-                         tcp_nodelay=True)
+        if self.controller is None:
+            rospy.Subscriber(params.gripper_command_topic, Float64, self._on_gripper_command, queue_size=1,
+                             tcp_nodelay=True)
         rospy.Service("~reset", Trigger, self._on_reset)
         if not params.lockstep:  # lockstep starts its first episode once the policy node is up
             with self.lock:
@@ -153,20 +230,17 @@ class SimulatorNode:
             print(f"success rate: {sum(self.results)}/{len(self.results)}", flush=True)
 
     def _spin_real_time(self) -> None:
-        """Simulated time is kept locked to the wall clock, as a real arm's would be: when the
-        loop wakes late (a loaded machine), the missed physics steps are run before publishing,
-        so a command always acts for as long in simulation as it did in reality. Every
-        ``control_dt`` of simulated time after the first command, the environment judges the
-        episode."""
+        """Simulated time is kept locked to the wall clock, as a real arm's would be
+        (:class:`~fr5_rl.sim.pacing.WallClockPacer`): when the loop wakes late (a loaded machine),
+        the missed physics steps are run before publishing, so a command always acts for as long
+        in simulation as it did in reality. Every ``control_dt`` of simulated time after the
+        first command, the environment judges the episode."""
         params, env = self.params, self.env
         rate = rospy.Rate(1.0 / self.physics_dt)
-        steps_per_period = whole_multiple(env.control_dt, self.physics_dt) or 1
-        camera_period, marker_period = 1.0 / params.camera_rate, 1.0 / params.marker_rate
-        start = time.monotonic()
-        step = 0  # physics steps since start: simulated time is step * physics_dt
-        next_judge = next_publish = 0
-        next_camera = next_marker = 0.0
-        max_catch_up = 10 * self.steps_per_publish  # beyond that, let simulated time slip
+        pacer = WallClockPacer(self.physics_dt, max_catch_up=10 * self.steps_per_publish)
+        judge = StepSchedule(whole_multiple(env.control_dt, self.physics_dt) or 1)
+        publish = AlignedStepSchedule(self.steps_per_publish)
+        camera, markers = TimeSchedule(1.0 / params.camera_rate), TimeSchedule(1.0 / params.marker_rate)
         while not rospy.is_shutdown():
             with self.lock:
                 if self.holding and time.monotonic() >= self.hold_until:
@@ -176,32 +250,23 @@ class SimulatorNode:
                         break
                     else:
                         self._start_episode(settle=params.reset_settle_time)
-                caught_up = 0
-                wall = time.monotonic() - start
-                while step * self.physics_dt < wall - 0.5 * self.physics_dt and caught_up < max_catch_up:
+                if self.controller is not None:
+                    self._follow_controller()
+                for step in pacer.due_steps():
                     env.advance_physics(self.servo.targets_for_step(self.arm_command), self.gripper_target)
-                    step += 1
-                    caught_up += 1
                     if not self.commanded:
-                        next_judge = step + steps_per_period  # episodes are timed from the first command
-                    elif not self.holding and step >= next_judge:
-                        next_judge += steps_per_period
+                        judge.restart(step)  # episodes are timed from the first command
+                    elif not self.holding and judge.due(step):
                         verdict = env.judge_period()
                         if verdict.ended:
-                            self._finish_episode(verdict, step * self.physics_dt)
+                            self._finish_episode(verdict, pacer.sim_time)
                         self.tcp_path.append(tuple(env.tcp_position()))
-                sim_time = step * self.physics_dt
-                if wall - sim_time > 1.0:  # hopelessly behind: resynchronise rather than race
-                    start += wall - sim_time
-                if step >= next_publish:
-                    next_publish = step + self.steps_per_publish - step % self.steps_per_publish
+                if publish.due(pacer.step):
                     stamp = rospy.Time.now()
                     self._publish_state(stamp)
-                    if sim_time >= next_camera and self.target_pub is not None:
-                        next_camera = sim_time + camera_period - 1e-9
+                    if self.target_pub is not None and camera.due(pacer.sim_time):
                         self.target_pub.publish(self._camera_message(stamp))
-                    if sim_time >= next_marker:
-                        next_marker = sim_time + marker_period - 1e-9
+                    if markers.due(pacer.sim_time):
                         self.marker_pub.publish(scene_markers(env.scene(), env.object_pose(), self.tcp_path, stamp))
             try:
                 rate.sleep()
@@ -303,7 +368,12 @@ class SimulatorNode:
         """Place a new object (seed + episode), hold the arm where the reset put it, and tell
         the policy node a new episode starts; with ``settle`` (s) > 0, tell it only after the
         arm held the new scene that long (the real-time loop calls :meth:`_begin_episode`)."""
-        self.env.reset(seed=self.params.seed + self.episode)
+        if self.params.episode_start == "go_to_start" and self.episode > 0:
+            # A real arm is not teleported: only the object is placed, as a person would.
+            self.env.reset(seed=self.params.seed + self.episode,
+                           options={"arm_positions": self.env.joint_positions().tolist()})
+        else:
+            self.env.reset(seed=self.params.seed + self.episode)
         self.arm_command = None
         self.servo.reset(self.env.joint_positions())
         self.gripper_target = self.spec.max_opening_width
@@ -322,6 +392,12 @@ class SimulatorNode:
         """Obey commands from now on and tell the policy node a new episode starts."""
         self.holding, self.settling = False, False
         self.hold_until = 0.0
+        if self.params.episode_start == "go_to_start":
+            # The policy node answers once its start move is done: until then the loop runs the
+            # arm on its commands without timing an episode.
+            self.positioning = True
+            threading.Thread(target=self._reset_policy_then_start, daemon=True).start()
+            return
         if self.reset_policy is not None:
             try:
                 self.reset_policy()
@@ -330,6 +406,33 @@ class SimulatorNode:
                 log = rospy.logwarn_throttle if self.params.lockstep else rospy.logdebug_throttle
                 log(30.0, f"sim_node: could not reset the policy node through "
                           f"{self.params.policy_reset_service}: {error}")
+
+    def _follow_controller(self) -> None:
+        """gripper_interface xmlrpc (lock held): the fingers take the width the emulated controller
+        was given, and it reads back what they measure."""
+        width = self.controller.commanded_width()
+        if width is not None and not self.holding:
+            self.gripper_target = float(np.clip(width, 0.0, self.spec.max_opening_width))
+        states = self.env.joint_states()
+        arm = len(self.spec.joint_names)
+        self.controller.set_measured_width(sum(states.positions[arm:]),
+                                           moving=any(abs(speed) > 1e-3 for speed in states.velocities[arm:]))
+
+    def _reset_policy_then_start(self) -> None:
+        """episode_start go_to_start (a thread of its own): the policy node's ~reset, which
+        answers when the arm stands in the training start distribution; the episode starts with
+        the next command."""
+        try:
+            rospy.wait_for_service(self.params.policy_reset_service, timeout=120.0)  # at start-up
+            answer = self.reset_policy()
+            ok, detail = answer.success, answer.message
+        except (rospy.ServiceException, rospy.ROSException) as error:
+            ok, detail = False, str(error)
+        if not ok:
+            rospy.logwarn(f"sim_node: the policy node's start move did not end at the start: {detail}")
+        with self.lock:
+            self.positioning = False
+            self.commanded = False  # timed from the policy's first command
 
     def _finish_episode(self, verdict: EpisodeVerdict, sim_time: float) -> None:
         """Publish and log the outcome; in real time, hold the arm still for a moment."""
@@ -365,7 +468,7 @@ class SimulatorNode:
             rospy.logwarn_throttle(1.0, "sim_node: arm command outside the joint limits was clamped")
         with self.lock:
             if not self.holding:
-                self.commanded = True
+                self.commanded = self.commanded or not self.positioning
                 self.arm_command = tuple(clamped.tolist())
             self.new_command = True
             self.command_arrived.notify_all()
@@ -387,16 +490,17 @@ class SimulatorNode:
         return TriggerResponse(success=True, message=f"episode {self.episode} started")
 
     # ------------------------------------------------------------------ outputs
-    def _joint_state_message(self, stamp: rospy.Time) -> JointState:
-        states = self.env.joint_states()
-        if not self.params.publish_finger_joints:
-            arm = len(self.spec.joint_names)
-            states = JointStates(states.names[:arm], states.positions[:arm], states.velocities[:arm])
-        return joint_state_message(states, stamp)
-
     def _publish_state(self, stamp: rospy.Time) -> None:
-        """The joint state and, for the simulated camera, the object's true pose, stamped alike."""
-        self.joint_pub.publish(self._joint_state_message(stamp))
+        """The joint state as the driver reports it; for the simulated camera, all joints and
+        the object's true pose, stamped alike."""
+        states = self.env.joint_states()
+        if self.truth_pub is not None:
+            self.truth_pub.publish(joint_state_message(states, stamp))
+        arm = len(self.spec.joint_names) if not self.params.publish_finger_joints else len(states.names)
+        # The FAIRINO driver fills positions only: its velocities are all 0.0.
+        velocities = states.velocities[:arm] if self.params.publish_velocities else (0.0,) * arm
+        self.joint_pub.publish(joint_state_message(JointStates(states.names[:arm], states.positions[:arm], velocities),
+                                                   stamp))
         if self.object_pub is not None:
             self.object_pub.publish(object_marker(self.env.scene(), self.env.object_pose(), stamp))
 
@@ -415,52 +519,6 @@ class SimulatorNode:
         position.x, position.y, position.z = object_in_camera[:3, 3]
         orientation.x, orientation.y, orientation.z, orientation.w = quaternion_from_matrix(object_in_camera[:3, :3])
         return message
-
-
-# ---------------------------------------------------------------------- messages
-def joint_state_message(states: JointStates, stamp: rospy.Time) -> JointState:
-    """``sensor_msgs/JointState`` of the eight joints, by name."""
-    message = JointState()
-    message.header.stamp = stamp
-    message.name = list(states.names)
-    message.position = list(states.positions)
-    message.velocity = list(states.velocities)
-    return message
-
-
-def _marker(kind: int, namespace: str, rgba: Sequence[float], frame_id: str, stamp: rospy.Time) -> Marker:
-    marker = Marker(type=kind, action=Marker.ADD, ns=namespace, id=0)
-    marker.header.frame_id = frame_id
-    marker.header.stamp = stamp
-    marker.pose.orientation.w = 1.0
-    marker.color.r, marker.color.g, marker.color.b, marker.color.a = rgba
-    return marker
-
-
-def object_marker(scene: SceneDescription, object_pose: Pose, stamp: rospy.Time) -> Marker:
-    """The object where it is now: shape, size (m) and pose in ``scene.frame_id``."""
-    kind = Marker.CYLINDER if scene.object_shape == "cylinder" else Marker.CUBE
-    obj = _marker(kind, "object", (0.85, 0.2, 0.15, 1.0), scene.frame_id, stamp)
-    obj.scale.x, obj.scale.y, obj.scale.z = scene.object_size
-    obj.pose.position.x, obj.pose.position.y, obj.pose.position.z = object_pose.position
-    orientation = obj.pose.orientation
-    orientation.x, orientation.y, orientation.z, orientation.w = object_pose.quaternion
-    return obj
-
-
-def scene_markers(scene: SceneDescription, object_pose: Pose, tcp_path: Iterable[Tuple[float, float, float]],
-                  stamp: rospy.Time) -> MarkerArray:
-    """rviz markers: the table, the object where it is now, and the tcp's recent path."""
-    frame = scene.frame_id
-    table = _marker(Marker.CUBE, "table", (0.55, 0.42, 0.3, 1.0), frame, stamp)
-    table.scale.x, table.scale.y, table.scale.z = scene.table_size
-    table.pose.position.x, table.pose.position.y, table.pose.position.z = scene.table_center
-
-    obj = object_marker(scene, object_pose, stamp)
-    path = _marker(Marker.LINE_STRIP, "tcp_path", (0.1, 0.5, 1.0, 0.9), frame, stamp)
-    path.scale.x = 0.004
-    path.points = [Point(x=x, y=y, z=z) for x, y, z in tcp_path]
-    return MarkerArray(markers=[table, obj, path])
 
 
 def main() -> int:

@@ -8,11 +8,12 @@ image obeys exactly the model the CameraInfo carries.
 from __future__ import annotations
 
 import pkgutil
-from typing import Any, Mapping, Optional, Sequence, Tuple
+from typing import Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 import pybullet as p
 
+from ..env_config import EnvConfig
 from .robot import urdf_for_pybullet
 from .world import PyBulletWorld
 
@@ -26,11 +27,11 @@ _GL_IN_OPTICAL = np.diag([1.0, -1.0, -1.0, 1.0])
 class SimulatedCamera:
     """The scene as a depth camera at a fixed pose sees it.
 
-    :param env_cfg: ``config/env.yaml`` as loaded (table and simulation sections are used).
+    :param env_cfg: ``config/env.yaml`` as loaded (:class:`~fr5_rl.env_config.EnvConfig`) (table and simulation sections are used).
     :param joint_names: the URDF joints the caller will set by name (arm and fingers).
     :param base_from_optical: 4x4 pose of the optical frame in base_link (m).
     :param projection: 4x4 OpenGL projection of the camera model
-        (:meth:`fr5_rl.runtime.pinhole.Intrinsics.opengl_projection`).
+        (:meth:`fr5_rl.perception.camera_model.Intrinsics.opengl_projection`).
     :param width: image width (pixels).
     :param height: image height (pixels).
     :param near: near clipping distance (m).
@@ -39,13 +40,12 @@ class SimulatedCamera:
         hardware or software OpenGL).
     """
 
-    def __init__(self, env_cfg: Mapping[str, Any], joint_names: Sequence[str], base_from_optical: np.ndarray,
+    def __init__(self, env_cfg: EnvConfig, joint_names: Sequence[str], base_from_optical: np.ndarray,
                  projection: np.ndarray, width: int, height: int, near: float, far: float,
                  renderer: str = "tiny") -> None:
         if renderer not in RENDERERS:
             raise ValueError(f"renderer must be one of {RENDERERS}, got {renderer!r}")
-        sim_cfg = dict(env_cfg["simulation"])
-        self.world = PyBulletWorld(sim_cfg, gui=False, renders=True)
+        self.world = PyBulletWorld(env_cfg.simulation, gui=False, renders=True)
         client = self.client = self.world.client
         self._egl_plugin = -1
         if renderer == "egl":
@@ -56,7 +56,7 @@ class SimulatedCamera:
             if self._egl_plugin < 0:
                 self.world.close()
                 raise RuntimeError("PyBullet's EGL renderer plugin could not be loaded (no EGL library?)")
-        self.world.add_table(env_cfg["table"])
+        self.world.add_table(env_cfg.table)
         self.robot = p.loadURDF(urdf_for_pybullet(), basePosition=[0, 0, 0], useFixedBase=True,
                                 physicsClientId=client)
         index = {}

@@ -2,21 +2,29 @@
 from __future__ import annotations
 
 import hashlib
+import re
 import tempfile
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pybullet as p
 
 from ..config import RobotSpec, package_root
+from ..env_config import SimulationConfig
+
+
+# The generator's massless root (tools/generate_description.py ROOT_LINK_XML), one line each.
+_WORLD_ROOT = re.compile(r'^  <link name="world"/>\n|^  <joint name="world_joint" type="fixed">.*\n', re.MULTILINE)
 
 
 def urdf_for_pybullet(urdf_path: Path | None = None) -> str:
     """Path of a copy of the package URDF that PyBullet can load.
 
     PyBullet does not resolve ``package://fr5_rl/`` mesh URIs, so the copy has them replaced by
-    the package root. The copy is cached in the temp directory under a content hash.
+    the package root. The massless ``world`` root that robot_state_publisher needs is left out:
+    PyBullet's fixed base is ``base_link`` itself. The copy is cached in the temp directory under
+    a content hash.
     """
     root = package_root()
     urdf_path = urdf_path or root / "urdf" / "fr5.urdf"
@@ -25,6 +33,7 @@ def urdf_for_pybullet(urdf_path: Path | None = None) -> str:
             f"{urdf_path} is missing; regenerate it with `python tools/generate_description.py`"
         )
     text = urdf_path.read_text(encoding="utf-8").replace("package://fr5_rl/", f"{root}/")
+    text = _WORLD_ROOT.sub("", text)
     digest = hashlib.sha1(text.encode("utf-8")).hexdigest()[:16]
     resolved = Path(tempfile.gettempdir()) / f"fr5_rl_{digest}.urdf"
     if not resolved.is_file():
@@ -41,7 +50,7 @@ class FR5Robot:
     an opening width in metres, split evenly between the two mirrored fingers.
     """
 
-    def __init__(self, client: int, robot: RobotSpec, sim_cfg: Mapping[str, Any]) -> None:
+    def __init__(self, client: int, robot: RobotSpec, sim_cfg: SimulationConfig) -> None:
         self.client = client
         self.spec = robot
         self.body = p.loadURDF(
@@ -67,15 +76,15 @@ class FR5Robot:
         # One motor call for all eight joints: per-joint forces and gains in one list each.
         # Grip force (N) the simulated gripper squeezes with: the PGI-140-80 is set between
         # 40 and 140 N; a 0.1 kg object needs little, and less force keeps contacts stable.
-        grip_force = min(float(sim_cfg["gripper_force"]), robot.finger_effort)
+        grip_force = min(sim_cfg.gripper_force, robot.finger_effort)
         self._forces = robot.effort_limits.tolist() + [grip_force] * 2
-        self._position_gains = [float(sim_cfg["arm_position_gain"])] * n_arm + [float(sim_cfg["finger_position_gain"])] * 2
-        self._velocity_gains = [float(sim_cfg["arm_velocity_gain"])] * n_arm + [1.0, 1.0]
+        self._position_gains = [sim_cfg.arm_position_gain] * n_arm + [sim_cfg.finger_position_gain] * 2
+        self._velocity_gains = [sim_cfg.arm_velocity_gain] * n_arm + [1.0, 1.0]
         self._finger_travel = robot.finger_travel
         # The gripper moves its fingers at its rated speed: the target ramps at most this far
         # per command (one control period).
         self._finger_velocity = robot.finger_velocity
-        self._finger_step = robot.finger_velocity * float(sim_cfg["control_dt"])
+        self._finger_step = robot.finger_velocity * sim_cfg.control_dt
         self._finger_target = robot.finger_travel
         self._joint_damping: Optional[float] = None  # unknown until set
         for index in self.finger_joints:

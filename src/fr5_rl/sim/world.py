@@ -5,16 +5,18 @@ Every call passes ``physicsClientId`` so several worlds coexist in one process.
 from __future__ import annotations
 
 import os
-from typing import Any, Mapping, Optional, Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 import pybullet as p
+
+from ..env_config import SimulationConfig, TableConfig
 
 
 class PyBulletWorld:
     """Owns one PyBullet client: physics settings, the table, the object, stepping."""
 
-    def __init__(self, sim_cfg: Mapping[str, Any], gui: bool = False, renders: bool = True) -> None:
+    def __init__(self, sim_cfg: SimulationConfig, gui: bool = False, renders: bool = True) -> None:
         """``renders=False``: a world nobody takes pictures of, which is faster to build.
 
         PyBullet's built-in TinyRenderer converts every new body into a render mesh (0.3 ms
@@ -27,12 +29,12 @@ class PyBulletWorld:
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         if self.client < 0:
             raise RuntimeError("PyBullet could not connect (is another GUI instance open?)")
-        self.physics_dt = float(sim_cfg["physics_dt"])
-        self.substeps = int(round(float(sim_cfg["control_dt"]) / self.physics_dt))
+        self.physics_dt = sim_cfg.physics_dt
+        self.substeps = int(round(sim_cfg.control_dt / self.physics_dt))
         p.setTimeStep(self.physics_dt, physicsClientId=self.client)
-        p.setGravity(0.0, 0.0, float(sim_cfg["gravity"]), physicsClientId=self.client)
+        p.setGravity(0.0, 0.0, sim_cfg.gravity, physicsClientId=self.client)
         p.setPhysicsEngineParameter(
-            numSolverIterations=int(sim_cfg["solver_iterations"]),
+            numSolverIterations=sim_cfg.solver_iterations,
             deterministicOverlappingPairs=1,
             physicsClientId=self.client,
         )
@@ -47,12 +49,12 @@ class PyBulletWorld:
         self._object_shapes: Tuple[int, int] = (-1, -1)
 
     # ------------------------------------------------------------------ scene
-    def add_table(self, table_cfg: Mapping[str, Any]) -> int:
+    def add_table(self, table_cfg: TableConfig) -> int:
         """Static box whose top face lies at ``top_height`` in base_link; returns its body id."""
-        sx, sy, thickness = (float(v) for v in table_cfg["size"])
+        sx, sy, thickness = table_cfg.size
         half = [sx / 2.0, sy / 2.0, thickness / 2.0]
-        cx, cy = (float(v) for v in table_cfg["center_xy"])
-        top = float(table_cfg["top_height"])
+        cx, cy = table_cfg.center_xy
+        top = table_cfg.top_height
         collision = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=self.client)
         visual = p.createVisualShape(
             p.GEOM_BOX, halfExtents=half, rgbaColor=[0.55, 0.42, 0.3, 1.0], physicsClientId=self.client
@@ -61,7 +63,7 @@ class PyBulletWorld:
             0.0, collision, visual, [cx, cy, top - thickness / 2.0], physicsClientId=self.client
         )
         p.changeDynamics(
-            self.table_id, -1, lateralFriction=float(table_cfg["lateral_friction"]), physicsClientId=self.client
+            self.table_id, -1, lateralFriction=table_cfg.lateral_friction, physicsClientId=self.client
         )
         return self.table_id
 

@@ -1,9 +1,12 @@
 """What every task shares: the state it judges, its outcome, the shaped reward."""
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, Mapping, Optional, Sequence
+from typing import Dict, Mapping, Optional, Sequence
+
+from ..env_config import EnvConfig
 
 
 @dataclass
@@ -52,21 +55,19 @@ class Task:
     name = "task"
     include_lift = False
 
-    def __init__(self, cfg: Mapping[str, Any], max_opening_width: float) -> None:
-        self.cfg = cfg
-        self.task_cfg = cfg[self.name]
-        self.max_steps = int(self.task_cfg["max_steps"])
+    def __init__(self, cfg: EnvConfig, max_opening_width: float) -> None:
+        self.max_steps = cfg.task(self.name).max_steps
         self.max_opening_width = max_opening_width
-        reward = cfg["reward"]
-        self.weights = dict(reward["weights"])
-        self.distance_scale = float(reward["distance_scale"])
-        self.orientation_scale = float(reward["orientation_scale"])
-        self.potential_gain = float(reward["potential_gain"])
-        self.success_bonus = float(reward["success_bonus"])
-        self.collision_penalty = float(reward["collision_penalty"])
-        self.failure_penalty = float(reward["failure_penalty"])
-        self.action_penalty = float(reward["action_penalty"])
-        self.sparse = reward["mode"] == "sparse"
+        reward = cfg.reward
+        self.weights = dataclasses.asdict(reward.weights)
+        self.distance_scale = reward.distance_scale
+        self.orientation_scale = reward.orientation_scale
+        self.potential_gain = reward.potential_gain
+        self.success_bonus = reward.success_bonus
+        self.collision_penalty = reward.collision_penalty
+        self.failure_penalty = reward.failure_penalty
+        self.action_penalty = reward.action_penalty
+        self.sparse = reward.mode == "sparse"
         self._previous_potential: Optional[float] = None
 
     def reset(self) -> None:

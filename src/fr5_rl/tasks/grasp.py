@@ -5,6 +5,7 @@ from typing import Dict
 
 import numpy as np
 
+from ..env_config import EnvConfig
 from .base import Task, TaskOutcome, TaskState
 
 
@@ -18,15 +19,15 @@ class GraspTask(Task):
     name = "grasp"
     include_lift = True
 
-    def __init__(self, cfg, max_opening_width: float) -> None:
+    def __init__(self, cfg: EnvConfig, max_opening_width: float) -> None:
         super().__init__(cfg, max_opening_width)
-        self.lift_height = float(self.task_cfg["lift_height"])
-        self.hold_time = float(self.task_cfg["hold_time"])
-        self.max_tilt_cos = float(np.cos(np.deg2rad(float(self.task_cfg["knocked_over_angle_deg"]))))
-        obj = cfg["object"]
+        grasp = cfg.grasp
+        self.lift_height = grasp.lift_height
+        self.hold_time = grasp.hold_time
+        self.max_tilt_cos = float(np.cos(np.deg2rad(grasp.knocked_over_angle_deg)))
         # Pushed more than 10 cm beyond the placement region: out of reach.
-        self.region_low = [float(v) - 0.1 for v in obj["region_low"]]
-        self.region_high = [float(v) + 0.1 for v in obj["region_high"]]
+        self.region_low = [v - 0.1 for v in cfg.object.region_low]
+        self.region_high = [v + 0.1 for v in cfg.object.region_high]
         # Close when the tcp is this close to the object centre (m): the shaping's cue.
         self.close_distance = 0.02
         self.lifted_time = 0.0

@@ -5,6 +5,7 @@ from typing import Dict
 
 import numpy as np
 
+from ..env_config import EnvConfig
 from .base import Task, TaskOutcome, TaskState
 
 
@@ -17,11 +18,12 @@ class ReachTask(Task):
 
     name = "reach"
 
-    def __init__(self, cfg, max_opening_width: float) -> None:
+    def __init__(self, cfg: EnvConfig, max_opening_width: float) -> None:
         super().__init__(cfg, max_opening_width)
-        self.success_distance = float(self.task_cfg["success_distance"])
-        self.min_down_cosine = float(np.cos(np.deg2rad(float(self.task_cfg["max_approach_angle_deg"]))))
-        self.min_open_width = float(self.task_cfg["min_open_width"])
+        reach = cfg.reach
+        self.success_distance = reach.success_distance
+        self.min_down_cosine = float(np.cos(np.deg2rad(reach.max_approach_angle_deg)))
+        self.min_open_width = reach.min_open_width
 
     def terms(self, state: TaskState) -> Dict[str, float]:
         return {

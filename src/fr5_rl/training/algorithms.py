@@ -1,12 +1,15 @@
-"""Hyperparameter files (``config/<algo>_<task>.yaml``, rl-zoo style) and their checks."""
+"""The hyperparameter file of an algorithm and task (``config/<algo>_<task>.yaml``), loaded and
+checked against the Stable-Baselines3 algorithm it configures (the file's schema and its reading:
+:mod:`fr5_rl.training.hyperparameters`)."""
 from __future__ import annotations
 
 import inspect
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Tuple
+from typing import List, Optional
 
-from ..config import ConfigError, Hyperparameters, config_path, deep_update, load_yaml, package_root, typed
-from ..runtime.bundle import algorithm_class
+from ..config import ConfigError, package_root, typed
+from ..deploy.bundle import algorithm_class
+from .hyperparameters import Hyperparameters, hyperparameter_path, read_hyperparameter_file
 
 # Constructor arguments the trainer sets itself: a hyperparameter file must not.
 TRAINER_OWNED = ("env", "seed", "device", "tensorboard_log", "verbose", "_init_setup_model")
@@ -17,31 +20,10 @@ def hyperparameter_source(algo: str, task: str, path: Optional[str | Path] = Non
     return path or f"{algo}_{task}"
 
 
-def hyperparameter_path(path_or_name: str | Path) -> Path:
-    """A hyperparameter file's path: ``path_or_name`` if it is a file, else ``config/<name>.yaml``."""
-    path = Path(path_or_name)
-    return path if path.is_file() else config_path(str(path_or_name))
-
-
-def read_hyperparameter_file(path_or_name: str | Path, _seen: Tuple[Path, ...] = ()) -> Dict[str, Any]:
-    """A hyperparameter file as a mapping, with its ``base`` (another file's name in ``config/``
-    or a path) merged under it: a stage or variant states only what it changes.
-
-    :raises ConfigError: a missing file, or files that build on each other in a circle.
-    """
-    path = hyperparameter_path(path_or_name).resolve()
-    if path in _seen:
-        raise ConfigError(f"{path.name}: 'base' leads back to itself ({' -> '.join(p.name for p in (*_seen, path))})")
-    data = load_yaml(path_or_name)
-    base = data.pop("base", None)
-    if base is None:
-        return data
-    return deep_update(read_hyperparameter_file(str(base), (*_seen, path)), data, strict=False)
-
-
 def load_hyperparameters(algo: str, task: str, path: Optional[str | Path] = None) -> Hyperparameters:
     """Read and type-check a hyperparameter file (with its ``base``, see
-    :func:`read_hyperparameter_file`); :func:`check_hyperparameters` checks the rest."""
+    :func:`~fr5_rl.training.hyperparameters.read_hyperparameter_file`); :func:`check_hyperparameters`
+    checks the rest."""
     source = hyperparameter_path(hyperparameter_source(algo, task, path))
     try:
         shown = source.resolve().relative_to(package_root())

@@ -16,7 +16,7 @@ try:
 except ImportError:  # stable-baselines3 < 2.6 (the Python 3.8 pin)
     from stable_baselines3.common.utils import get_schedule_fn as FloatSchedule
 
-from ..runtime.bundle import save_model_dir, write_json_atomic
+from ..deploy.bundle import save_model_dir, write_json_atomic
 
 REPLAY_FILE = "replay_buffer.pkl"
 

@@ -21,8 +21,8 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from ..config import ExpertStartSettings
 from ..expert import ScriptedExpert
+from .hyperparameters import ExpertStartSettings
 
 STATE_FILE = "curriculum.json"
 # The plain task as a reach-back level, in logs and plots: one curve that ends above 1.
@@ -95,7 +95,7 @@ class ExpertStartWrapper(gym.Wrapper):
         for _ in range(self.retries):
             prefix = int(random.integers(low, high + 1))
             self.expert.reset()
-            for taken in range(prefix):
+            for taken in range(prefix):  # noqa: B007 (read after the loop: where the episode ended)
                 observation, _, terminated, truncated, _ = self.env.step(self.expert.act(observation))
                 if terminated or truncated:
                     break

@@ -14,7 +14,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from ..runtime.bundle import write_json_atomic
+from ..deploy.bundle import write_json_atomic
 
 HELD_OUT_SEED_START = 1_000_000  # far from every training (0..) and evaluation-callback seed
 

@@ -13,15 +13,16 @@ export_onnx.py and the ROS node take it like any trained model.
 """
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 from typing import Any, Dict, List, Tuple
 
 import numpy as np
 
-from ..config import DaggerConfig, load_typed, load_yaml
-from ..runtime.bundle import build_meta, machine_description, save_model_dir, write_json_atomic
+from ..config import load_typed, load_yaml
+from ..deploy.bundle import build_meta, machine_description, save_model_dir, write_json_atomic
+from .hyperparameters import DaggerConfig
+from .run_settings import DaggerRun
 from .train import EVAL_SEED_OFFSET
 
 
@@ -138,8 +139,8 @@ def evaluate(env, learner, episodes: int, seed: int) -> float:
     return successes / max(episodes, 1)
 
 
-def run_dagger(args: argparse.Namespace) -> int:
-    """Run DAgger as the command line asks (see :mod:`fr5_rl.cli.imitate`); returns 0.
+def run_dagger(run: DaggerRun) -> int:
+    """Run DAgger with ``run``'s settings (the command line's: :mod:`fr5_rl.cli.imitate`); returns 0.
 
     :raises ConfigError: the DAgger file is malformed.
     """
@@ -149,25 +150,25 @@ def run_dagger(args: argparse.Namespace) -> int:
     from ..expert import ScriptedExpert
 
     t_start = time.time()
-    torch.set_num_threads(args.torch_threads)
-    config = load_typed(DaggerConfig, args.hyperparams or f"dagger_{args.task}")
+    torch.set_num_threads(run.torch_threads)
+    config = load_typed(DaggerConfig, run.hyperparams or f"dagger_{run.task}")
     dagger = config.dagger
-    rounds = args.rounds if args.rounds is not None else dagger.rounds
-    episodes = args.episodes or dagger.episodes
-    epochs = args.epochs or dagger.epochs
+    rounds = run.rounds if run.rounds is not None else dagger.rounds
+    episodes = run.episodes or dagger.episodes
+    epochs = run.epochs or dagger.epochs
     env_overrides = config.env
-    run_dir = args.run_dir or Path("runs") / f"{args.task}_dagger_{time.strftime('%Y%m%d-%H%M%S')}"
+    run_dir = run.run_dir or Path("runs") / f"{run.task}_dagger_{time.strftime('%Y%m%d-%H%M%S')}"
     run_dir.mkdir(parents=True, exist_ok=True)
-    rng = np.random.default_rng(args.seed)
+    rng = np.random.default_rng(run.seed)
 
-    env = FR5Env(task=args.task, config=env_overrides)
+    env = FR5Env(task=run.task, config=env_overrides)
     # Each round is judged on the task as registered and, when training randomises, also on
     # the training variant; the best round is the one with the highest sum of both.
-    eval_envs = {"task": FR5Env(task=args.task)}
+    eval_envs = {"task": FR5Env(task=run.task)}
     if env_overrides:
-        eval_envs["training_env"] = FR5Env(task=args.task, config=env_overrides)
+        eval_envs["training_env"] = FR5Env(task=run.task, config=env_overrides)
     expert = ScriptedExpert(env)
-    observations, labels, expert_success = rollouts(env, expert, None, episodes, args.seed, 1.0, rng)
+    observations, labels, expert_success = rollouts(env, expert, None, episodes, run.seed, 1.0, rng)
     print(f"round 0: expert demonstrations, {len(observations)} samples, expert success {expert_success:.0%}")
     history = [{"round": 0, "samples": len(observations), "driver_success": expert_success,
                 "wall_s": round(time.time() - t_start, 1)}]
@@ -176,16 +177,16 @@ def run_dagger(args: argparse.Namespace) -> int:
     for round_index in range(1, rounds + 1):
         normaliser = Normaliser(observations)
         if model is None:
-            model, venv = build_model_and_stats(args.task, env_overrides, config.algo_kwargs, normaliser, args.seed)
-        loss = fit(model, normaliser, observations, labels, epochs, seed=args.seed + round_index,
+            model, venv = build_model_and_stats(run.task, env_overrides, config.algo_kwargs, normaliser, run.seed)
+        loss = fit(model, normaliser, observations, labels, epochs, seed=run.seed + round_index,
                    learning_rate=dagger.learning_rate)
         learner = make_learner(model, normaliser)
-        rates = {name: evaluate(e, learner, args.eval_episodes, args.seed + EVAL_SEED_OFFSET)
+        rates = {name: evaluate(e, learner, run.eval_episodes, run.seed + EVAL_SEED_OFFSET)
                  for name, e in eval_envs.items()}
         success = sum(rates.values()) / len(rates)
         sync_stats(venv, normaliser)
-        meta = build_meta(args.task, "ppo", env_overrides, env.cfg, load_yaml("robot"), env.observation_space.shape[0],
-                          env.action_space.shape[0], env.control_dt, args.seed, trained_by="dagger",
+        meta = build_meta(run.task, "ppo", env_overrides, env.cfg, load_yaml("robot"), env.observation_space.shape[0],
+                          env.action_space.shape[0], env.control_dt, run.seed, trained_by="dagger",
                           num_timesteps=int(len(observations)), dagger_round=round_index)
         if success > best[0]:
             best = (success, round_index)
@@ -196,16 +197,16 @@ def run_dagger(args: argparse.Namespace) -> int:
                         "wall_s": round(time.time() - t_start, 1)})
         print(f"round {round_index}: {len(observations)} samples, loss {loss:.4f}, learner success "
               + ", ".join(f"{rate:.0%} ({name})" for name, rate in rates.items())
-              + f" on {args.eval_episodes} episodes")
+              + f" on {run.eval_episodes} episodes")
         write_json_atomic(run_dir / "summary.json", {
-            "task": args.task, "method": "dagger", "history": history, "best_round": best[1],
+            "task": run.task, "method": "dagger", "history": history, "best_round": best[1],
             "best_score": best[0], "wall_time_s": round(time.time() - t_start, 1),
-            "machine": machine_description(), "seed": args.seed})
+            "machine": machine_description(), "seed": run.seed})
         if round_index == rounds:
             break
         # The learner drives (with a decaying share of expert steps), the expert labels.
         beta = dagger.expert_share_decay ** round_index
-        new_obs, new_labels, _ = rollouts(env, expert, learner, episodes, args.seed + 1000 * round_index, beta, rng)
+        new_obs, new_labels, _ = rollouts(env, expert, learner, episodes, run.seed + 1000 * round_index, beta, rng)
         observations = np.concatenate([observations, new_obs])
         labels = np.concatenate([labels, new_labels])
     env.close()

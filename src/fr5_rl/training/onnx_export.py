@@ -12,7 +12,7 @@ from typing import List
 
 import numpy as np
 
-from ..runtime.bundle import ONNX_FILE, check_files_present, read_meta
+from ..deploy.bundle import ONNX_FILE, check_files_present, read_meta
 
 
 def build_actor_module(model, normalizer):
@@ -51,7 +51,7 @@ def export(model_dir: Path) -> Path:
     """Export MODEL_DIR's actor to MODEL_DIR/model.onnx; returns the path."""
     import torch
 
-    from ..runtime.policy import TorchPolicy, check_meta_matches_code
+    from ..deploy.policy import TorchPolicy, check_meta_matches_code
 
     check_files_present(model_dir, "torch")
     meta = read_meta(model_dir)
@@ -93,7 +93,7 @@ PARITY_TOLERANCE = 1e-5  # max |delta action| between the ONNX graph and the SB3
 
 def parity(model_dir: Path, count: int = 1000) -> float:
     """max |action_onnx - action_sb3| over ``count`` rollout observations."""
-    from ..runtime.policy import load_policy
+    from ..deploy.policy import load_policy
 
     torch_policy = load_policy(model_dir, "torch")
     onnx_policy = load_policy(model_dir, "onnx")

@@ -19,9 +19,9 @@ import tempfile
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
-from ..runtime.bundle import required_files
+from ..deploy.bundle import required_files
 from .evaluation import run_episodes
-from .tune import import_ray
+from .ray_compat import import_ray
 
 
 def seed_slices(seeds: Sequence[int], parts: int) -> List[List[int]]:
@@ -58,7 +58,7 @@ def evaluate_slice(task: str, env_overrides: Dict[str, Any], seeds: List[int], b
             return expert.act, expert.reset
 
         return node_id, run_episodes(task, env_overrides, make_actor, seeds)[skip:]
-    from ..runtime.policy import load_policy
+    from ..deploy.policy import load_policy
 
     with tempfile.TemporaryDirectory(prefix="fr5_rl_eval_model_") as directory:
         for name, data in (model_files or {}).items():

@@ -10,7 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Sequence, Tuple
 
-from ..runtime.bundle import write_json_atomic
+from ..deploy.bundle import write_json_atomic
+from ..env_config import EnvConfig
 
 # One marker per failure cause, so a cluster of one cause shows as one shape.
 FAILURE_MARKERS = {"collision": "x", "timeout": "s", "left_workspace": "^", "object_knocked_over": "v",
@@ -107,12 +108,12 @@ def plot_success_map(grid: Mapping[str, Any], records: Sequence[Mapping[str, Any
     return out
 
 
-def write_success_map(records: Sequence[Mapping[str, Any]], env_cfg: Mapping[str, Any], out_stem: Path,
+def write_success_map(records: Sequence[Mapping[str, Any]], env_cfg: EnvConfig, out_stem: Path,
                       title: str, bins: Tuple[int, int] = (4, 6)) -> Tuple[Path, Path]:
     """The success map of ``records`` over ``env_cfg``'s placement region, as
     ``<out_stem>.json`` (the grid) and ``<out_stem>.png`` (the picture)."""
-    region = env_cfg["object"]
-    grid = success_map(records, region["region_low"], region["region_high"], bins)
+    region = env_cfg.object
+    grid = success_map(records, region.region_low, region.region_high, bins)
     json_path, png_path = out_stem.with_suffix(".json"), out_stem.with_suffix(".png")
     write_json_atomic(json_path, {"title": title, **grid})
     plot_success_map(grid, records, png_path, title)

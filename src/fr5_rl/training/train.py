@@ -4,10 +4,12 @@ A run directory holds ``config.json`` (everything needed to resume), ``checkpoin
 (model + normalisation stats, replaced atomically every ``--checkpoint-freq`` steps),
 ``best/`` (best evaluation so far), ``final/``, TensorBoard logs in ``tb/``, evaluation curves
 in ``eval/evaluations.npz`` and ``summary.json`` (steps, wall time, time to solve, machine).
+
+The run's settings are a :class:`~fr5_rl.training.run_settings.TrainRun`.
 """
 from __future__ import annotations
 
-import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -16,12 +18,14 @@ from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 
-from ..config import ConfigError, ExpertStartSettings, Hyperparameters, load_yaml, typed
-from ..runtime.bundle import (MODEL_FILE, STATS_FILE, ModelFilesError, algorithm_class, build_meta,
+from ..config import ConfigError, load_yaml, typed
+from ..deploy.bundle import (MODEL_FILE, STATS_FILE, ModelFilesError, algorithm_class, build_meta,
                               check_files_present, check_sb3_zip, damaged, machine_description, read_meta,
                               recover_model_dir, save_model_dir, write_json_atomic)
 from .algorithms import check_hyperparameters, hyperparameter_source, load_hyperparameters
 from .callbacks import REPLAY_FILE, save_checkpoint
+from .hyperparameters import ExpertStartSettings, Hyperparameters
+from .run_settings import FIXED_ON_RESUME, TrainRun, read_run_config
 
 EVAL_SEED_OFFSET = 10_000  # evaluation seeds never overlap training seeds
 
@@ -101,7 +105,7 @@ def make_vec_env(task: str, env_overrides: Dict[str, Any], n_envs: int, seed: in
     return ChunkedSubprocVecEnv(factories, processes, start_method=start_method)
 
 
-def build_callbacks(args: argparse.Namespace, run_dir: Path, eval_env, meta: Dict[str, Any], t_start: float,
+def build_callbacks(run: TrainRun, run_dir: Path, eval_env, meta: Dict[str, Any], t_start: float,
                     summary: Dict[str, Any]):
     """Checkpointing, evaluation (best model with stats), reward-term logging, time-to-solve:
     the callback list, and its evaluation callback (which counts the evaluations it skipped)."""
@@ -109,14 +113,14 @@ def build_callbacks(args: argparse.Namespace, run_dir: Path, eval_env, meta: Dic
 
     from .callbacks import AtomicCheckpoint, GatedEvaluation, RewardTermLogger, SaveBest, SolveTimer
 
-    eval_every = max(args.eval_freq // args.n_envs, 1)
+    eval_every = max(run.eval_freq // run.n_envs, 1)
     evaluation = GatedEvaluation(
-        eval_env, n_eval_episodes=args.eval_episodes, eval_freq=eval_every, deterministic=True,
+        eval_env, n_eval_episodes=run.eval_episodes, eval_freq=eval_every, deterministic=True,
         log_path=str(run_dir / "eval"), best_model_save_path=None, callback_on_new_best=SaveBest(run_dir / "best", meta),
-        callback_after_eval=SolveTimer(run_dir, meta, summary, t_start, args.target_success, args.stop_at_success),
-        verbose=0, min_training_success=float(getattr(args, "eval_min_training_success", 0.0)),
+        callback_after_eval=SolveTimer(run_dir, meta, summary, t_start, run.target_success, run.stop_at_success),
+        verbose=0, min_training_success=float(run.eval_min_training_success),
     )
-    return CallbackList([AtomicCheckpoint(run_dir, meta, args.checkpoint_freq), RewardTermLogger(), evaluation]), evaluation
+    return CallbackList([AtomicCheckpoint(run_dir, meta, run.checkpoint_freq), RewardTermLogger(), evaluation]), evaluation
 
 
 def close_vec_env(venv, interrupted: bool) -> None:
@@ -137,14 +141,10 @@ def close_vec_env(venv, interrupted: bool) -> None:
     venv.close()
 
 
-def write_run_config(run_dir: Path, args: argparse.Namespace, hyper: Hyperparameters, **extra: Any) -> None:
-    """``config.json``: everything ``--resume`` needs to continue the run as it was started."""
-    write_json_atomic(run_dir / "config.json", {
-        "task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
-        "timesteps": args.timesteps, "hyperparams_resolved": hyper.to_dict(),
-        "checkpoint_freq": args.checkpoint_freq, "eval_freq": args.eval_freq,
-        "eval_episodes": args.eval_episodes, "no_subprocess": args.no_subprocess,
-        "target_success": args.target_success, "eval_min_training_success": float(getattr(args, "eval_min_training_success", 0.0)), **extra})
+def write_run_config(run_dir: Path, run: TrainRun, hyper: Hyperparameters, **extra: Any) -> None:
+    """``config.json``: everything ``--resume`` needs to continue the run as it was started
+    (:meth:`TrainRun.saved_config`)."""
+    write_json_atomic(run_dir / "config.json", run.saved_config(hyper.to_dict(), **extra))
 
 
 def initialise_from(model_dir: Path, task: str, algo: str, venv, meta: Dict[str, Any], run_dir: Path,
@@ -217,7 +217,7 @@ def load_widened(model_dir: Path, algo_cls, venv, blocks: Sequence[Tuple[int, in
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from ..runtime.policy import load_normalizer
+    from ..deploy.policy import load_normalizer
 
     try:
         stats = load_normalizer(model_dir)
@@ -277,99 +277,91 @@ def load_trained(model_dir: Path, algo_cls, venv, **load_kwargs: Any):
     return algo_cls.load(model_dir / MODEL_FILE, env=venv, device="cpu", **load_kwargs), venv
 
 
-def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
+def train(run: TrainRun, t_start: Optional[float] = None,
           extra_callbacks: Optional[Callable[[Path, Dict[str, Any], Dict[str, Any]], Sequence[Any]]] = None) -> int:
     """Run (or resume) one training run; returns the exit status (0 done, 130 interrupted).
 
-    :param args: the command line's options (see :mod:`fr5_rl.cli.train`); an optional
-        ``start_method`` attribute picks the subprocess start method (default forkserver).
-    :param t_start: wall-clock start (s since the epoch), for wall time and time to solve.
-    :param defaults: every option's default, so a resumed run keeps its own settings unless an
-        option is given again.
+    :param run: the run's settings; to resume, ``run.resume`` set and the settings merged with
+        the run's ``config.json`` by :meth:`TrainRun.resumed`.
+    :param t_start: wall-clock start (s since the epoch), for wall time and time to solve;
+        None: now.
     :param extra_callbacks: called as ``extra_callbacks(run_dir, meta, summary)``; the SB3
         callbacks it returns run after the evaluation callback at every step (e.g. reporting
-        to Ray Tune, see :mod:`fr5_rl.training.tune`).
+        to Ray Tune, see :mod:`fr5_rl.training.tune.trial`).
     :raises ConfigError: a configuration problem, before any training time is spent.
     """
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
-    torch.set_num_threads(max(args.torch_threads, 1))
-    if args.resume:
-        if args.run_dir is None or not (args.run_dir / "config.json").is_file():
-            raise ConfigError("--resume needs --run-dir pointing at an existing run (with config.json)")
-        saved = json.loads((args.run_dir / "config.json").read_text())
-        for key in ("task", "algo", "seed", "n_envs", "hyperparams_resolved", "timesteps"):
-            setattr(args, key, saved[key])
-        for key in ("checkpoint_freq", "eval_freq", "eval_episodes", "no_subprocess", "target_success",
-                    "eval_min_training_success"):
-            if key in saved and getattr(args, key, None) == defaults.get(key):
-                setattr(args, key, saved[key])  # keep the run's settings unless given again
-        source = str(args.run_dir / "config.json")
-        hyper = typed(Hyperparameters, args.hyperparams_resolved, f"{source}: hyperparams_resolved")
+    t_start = time.time() if t_start is None else t_start
+    torch.set_num_threads(max(run.torch_threads, 1))
+    if run.resume:
+        saved = read_run_config(run.run_dir)
+        source = str(Path(run.run_dir) / "config.json")
+        differ = [name for name in FIXED_ON_RESUME if getattr(run, name) != saved.get(name)]
+        if differ:
+            raise ConfigError(f"{source}: the run's {differ[0]} is {saved.get(differ[0])!r}, these settings' "
+                              f"{getattr(run, differ[0])!r}; merge them with TrainRun.resumed() to resume it")
+        hyper = typed(Hyperparameters, saved["hyperparams_resolved"], f"{source}: hyperparams_resolved")
     else:
-        source = str(hyperparameter_source(args.algo, args.task, args.hyperparams))
-        hyper = load_hyperparameters(args.algo, args.task, args.hyperparams)
-        args.n_envs = args.n_envs or hyper.n_envs
-        args.timesteps = int(args.timesteps or hyper.n_timesteps)
-        if args.run_dir is None:
-            args.run_dir = Path("runs") / f"{args.task}_{args.algo}_{time.strftime('%Y%m%d-%H%M%S')}"
-    if getattr(args, "processes", None) is not None and args.processes < 1:
-        raise ConfigError(f"--processes must be at least 1, got {args.processes}")
-    if not 0.0 <= float(getattr(args, "eval_min_training_success", 0.0)) <= 1.0:
-        raise ConfigError(f"--eval-min-training-success must be in [0, 1], got {args.eval_min_training_success}")
-    for warning in check_hyperparameters(args.algo, hyper, args.n_envs, source):
+        source = str(hyperparameter_source(run.algo, run.task, run.hyperparams))
+        hyper = load_hyperparameters(run.algo, run.task, run.hyperparams)
+        run = dataclasses.replace(
+            run, n_envs=run.n_envs or hyper.n_envs, timesteps=int(run.timesteps or hyper.n_timesteps),
+            run_dir=run.run_dir if run.run_dir is not None
+            else Path("runs") / f"{run.task}_{run.algo}_{time.strftime('%Y%m%d-%H%M%S')}")
+    run.check()
+    for warning in check_hyperparameters(run.algo, hyper, run.n_envs, source):
         print(f"train.py: warning: {warning}", file=sys.stderr)
-    run_dir: Path = args.run_dir
+    run_dir = Path(run.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "monitor").mkdir(exist_ok=True)
 
     from ..envs import FR5Env  # after argument checks: imports pybullet
 
     env_overrides = hyper.env
-    probe = FR5Env(task=args.task, config=env_overrides)
-    meta = build_meta(args.task, args.algo, env_overrides, probe.cfg, load_yaml("robot"),
+    probe = FR5Env(task=run.task, config=env_overrides)
+    meta = build_meta(run.task, run.algo, env_overrides, probe.cfg, load_yaml("robot"),
                       probe.observation_space.shape[0], probe.action_space.shape[0], probe.control_dt,
-                      args.seed, n_envs=args.n_envs, trained_by="rl")
+                      run.seed, n_envs=run.n_envs, trained_by="rl")
     probe.close()
 
-    venv = make_vec_env(args.task, env_overrides, args.n_envs, args.seed, run_dir / "monitor",
-                        not args.no_subprocess, getattr(args, "start_method", "forkserver"),
-                        getattr(args, "processes", None), hyper.expert_start)
-    eval_env = make_vec_env(args.task, env_overrides, 1, args.seed + EVAL_SEED_OFFSET, None, False)
-    algo_cls = algorithm_class(args.algo)
+    venv = make_vec_env(run.task, env_overrides, run.n_envs, run.seed, run_dir / "monitor", run.subprocess,
+                        run.start_method, run.processes, hyper.expert_start)
+    eval_env = make_vec_env(run.task, env_overrides, 1, run.seed + EVAL_SEED_OFFSET, None, False)
+    algo_cls = algorithm_class(run.algo)
     latest = run_dir / "checkpoints" / "latest"
     summary_path = run_dir / "summary.json"
-    summary: Dict[str, Any] = json.loads(summary_path.read_text()) if args.resume and summary_path.is_file() else {}
+    summary: Dict[str, Any] = json.loads(summary_path.read_text()) if run.resume and summary_path.is_file() else {}
     elapsed_before = float(summary.get("wall_time_s", 0.0))
 
-    if args.resume and recover_model_dir(latest):
+    if run.resume and recover_model_dir(latest):
         model, venv = load_trained(latest, algo_cls, venv)
         if (latest / REPLAY_FILE).is_file():
             model.load_replay_buffer(latest / REPLAY_FILE)
         print(f"train.py: resuming {run_dir} from step {model.num_timesteps}")
-    elif getattr(args, "init_from", None) is not None and not args.resume:
-        model, venv = initialise_from(args.init_from, args.task, args.algo, venv, meta, run_dir, hyper.algo_kwargs)
-        meta["initialised_from"] = {"model": str(args.init_from), "num_timesteps": int(model.num_timesteps)}
+    elif run.init_from is not None and not run.resume:
+        model, venv = initialise_from(run.init_from, run.task, run.algo, venv, meta, run_dir, hyper.algo_kwargs)
+        meta["initialised_from"] = {"model": str(run.init_from), "num_timesteps": int(model.num_timesteps)}
         model.num_timesteps = 0  # --timesteps counts this run's steps
-        write_run_config(run_dir, args, hyper, init_from=str(args.init_from))
-        print(f"train.py: starting from {args.init_from} ({meta['initialised_from']['num_timesteps']} steps)")
+        write_run_config(run_dir, run, hyper, init_from=str(run.init_from))
+        print(f"train.py: starting from {run.init_from} ({meta['initialised_from']['num_timesteps']} steps)")
     else:
-        if args.resume:
+        if run.resume:
             print(f"train.py: {run_dir} has no checkpoint yet; starting it from scratch")
         norm = hyper.normalize
         venv = VecNormalize(venv, norm_obs=norm.norm_obs, norm_reward=norm.norm_reward, clip_obs=norm.clip_obs,
                             gamma=float(hyper.algo_kwargs.get("gamma", 0.99)))
         kwargs = dict(hyper.algo_kwargs)
         policy = kwargs.pop("policy", "MlpPolicy")
-        model = algo_cls(policy, venv, seed=args.seed, device="cpu", tensorboard_log=str(run_dir / "tb"),
+        model = algo_cls(policy, venv, seed=run.seed, device="cpu", tensorboard_log=str(run_dir / "tb"),
                          verbose=0, **kwargs)
-        write_run_config(run_dir, args, hyper)
+        write_run_config(run_dir, run, hyper)
     eval_env = VecNormalize(eval_env, training=False, norm_obs=venv.norm_obs, norm_reward=False,
                             clip_obs=venv.clip_obs)
-    summary.update({"task": args.task, "algo": args.algo, "seed": args.seed, "n_envs": args.n_envs,
-                    "machine": machine_description(), "target_success": args.target_success})
-    callbacks, evaluation = build_callbacks(args, run_dir, eval_env, meta, t_start - elapsed_before, summary)
+    summary.update({"task": run.task, "algo": run.algo, "seed": run.seed, "n_envs": run.n_envs,
+                    "machine": machine_description(), "target_success": run.target_success})
+    callbacks, evaluation = build_callbacks(run, run_dir, eval_env, meta, t_start - elapsed_before, summary)
     if hyper.critic_warmup is not None:
         from .callbacks import CriticWarmup
 
@@ -380,11 +372,11 @@ def train(args: argparse.Namespace, t_start: float, defaults: Dict[str, Any],
         callbacks.callbacks.insert(0, ExpertStartCurriculum(hyper.expert_start, run_dir))
     if extra_callbacks is not None:
         callbacks.callbacks.extend(extra_callbacks(run_dir, meta, summary))
-    remaining = max(args.timesteps - int(model.num_timesteps), 0)
+    remaining = max(run.timesteps - int(model.num_timesteps), 0)
     interrupted = False
     try:
         model.learn(total_timesteps=remaining, callback=callbacks, reset_num_timesteps=False,
-                    progress_bar=not args.no_progress, tb_log_name="run")
+                    progress_bar=run.progress, tb_log_name="run")
     except KeyboardInterrupt:
         interrupted = True
         print("\ntrain.py: interrupted; saving a checkpoint before exiting", file=sys.stderr)

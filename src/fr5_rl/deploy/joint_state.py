@@ -1,0 +1,170 @@
+"""Reading a sensor_msgs/JointState-like message by joint name (no ROS import needed).
+
+``/joint_states`` carries no order guarantee and may hold other joints too: every value is
+looked up by name, and anything missing, mis-sized or non-finite is rejected with a reason.
+"""
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+from typing import Dict, Generic, Optional, Sequence, Tuple, TypeVar
+
+import numpy as np
+
+from ..observation import MIN_SAMPLE_INTERVAL, velocity_from_positions
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Reading(Generic[T]):
+    """The newest value of one input, or why it is unusable, with its arrival time.
+
+    :param value: the value; None when ``problem`` is set.
+    :param received: arrival time (s) on the caller's monotonic clock.
+    :param problem: why the input is unusable (a parse or tf failure), else None.
+    :param stamp: the message's header stamp (s, ROS time); 0 when it carries none.
+    """
+
+    value: Optional[T]
+    received: float
+    problem: Optional[str] = None
+    stamp: float = 0.0
+
+
+@dataclass
+class ArmJointState:
+    """Arm state in controller order (rad, rad/s); gripper opening width (m) if reported."""
+
+    positions: np.ndarray
+    velocities: Optional[np.ndarray]
+    gripper_width: Optional[float]
+
+
+class JointStateReader:
+    """Merges joint-state messages *by name* into the newest :class:`ArmJointState`.
+
+    ``/joint_states`` may come from several publishers (the arm's driver, a gripper driver),
+    each with some joints, in any order. Every joint keeps its newest value and when it came;
+    a reading's ``received`` is the arrival of its *oldest* arm joint, so one silent joint makes
+    the whole state stale. A message that names a joint twice, or holds NaN or inf, or whose
+    arrays do not match its names, is refused as a whole and holds the arm until a good message
+    brings the joints it was about. Velocities a driver leaves out, or all of them with
+    ``velocities_from_positions`` (a driver whose velocities are not measured: the FAIRINO
+    driver's are all 0.0), are estimated per joint from consecutive positions and stamps, with
+    the same :func:`~fr5_rl.observation.velocity_from_positions` the environments use. A message
+    whose arm positions imply a speed above ``max_joint_speeds`` (an encoder or driver glitch)
+    holds the arm until two consecutive messages agree again. Thread-safe: ROS callbacks update,
+    the timer reads.
+
+    :param arm_joint_names: the arm's joints in controller order (``j1`` … ``j6``).
+    :param finger_joint_names: the gripper's finger joints (their sum is the opening width).
+    :param velocities_from_positions: ignore the messages' velocities and estimate them.
+    :param max_joint_speeds: rad/s per arm joint (controller order) that no real motion exceeds;
+        None: no check.
+    """
+
+    def __init__(self, arm_joint_names: Sequence[str], finger_joint_names: Sequence[str],
+                 velocities_from_positions: bool = False, max_joint_speeds: Optional[Sequence[float]] = None) -> None:
+        self.arm_joint_names = tuple(arm_joint_names)
+        self.finger_joint_names = tuple(finger_joint_names)
+        self._known = set(self.arm_joint_names) | set(self.finger_joint_names)
+        self._velocities_from_positions = velocities_from_positions
+        self._max_speed = (dict(zip(self.arm_joint_names, (float(v) for v in max_joint_speeds)))
+                           if max_joint_speeds is not None else {})
+        self._glitch: Optional[Tuple[str, float]] = None  # why, and when it came
+        # name -> (position rad|m, velocity, stamp or arrival s (for velocity estimates), received s,
+        # header stamp s or 0)
+        self._joints: Dict[str, Tuple[float, float, float, float, float]] = {}
+        self._problem: Optional[Tuple[str, float, frozenset]] = None  # text, received, joints it was about
+        self._lock = threading.Lock()
+
+    def update(self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float],
+               stamp: float, received: float) -> Optional[str]:
+        """Take one message; returns what is wrong with it, or None.
+
+        :param stamp: the message's header stamp (s); 0 when the driver leaves it empty.
+        :param received: arrival time (s) on the caller's monotonic clock.
+        """
+        problem = self._check(names, positions, velocities)
+        with self._lock:
+            if problem is not None:
+                about = frozenset(name for name in names if name in self._known) or frozenset(self.arm_joint_names)
+                self._problem = (problem, received, about)
+                return problem
+            header_stamp, stamp = stamp, stamp or received
+            jump = None
+            for index, name in enumerate(names):
+                if name not in self._known:
+                    continue  # other joints on the topic are none of the policy's business
+                position = float(positions[index])
+                previous = self._joints.get(name)
+                # Judged on header stamps only: arrival times bunch up behind a busy network.
+                if jump is None and previous is not None and header_stamp > 0.0 and previous[4] > 0.0:
+                    jump = self._implausible(name, position - previous[0], stamp - previous[2])
+                if len(velocities) == len(names) and not self._velocities_from_positions:
+                    velocity = float(velocities[index])
+                elif previous is None:
+                    velocity = 0.0
+                else:
+                    velocity = velocity_from_positions(position, previous[0], stamp - previous[2], previous[1])
+                self._joints[name] = (position, velocity, stamp, received, header_stamp)
+            # Held from a jump until a message agrees with the one before it: the jump back from
+            # a glitch is implausible too, the next real state is not.
+            self._glitch = (jump, received) if jump is not None else None
+            if self._problem is not None and self._problem[2] <= set(names):
+                self._problem = None  # a good message brought every joint the bad one was about
+        return None
+
+    def _implausible(self, name: str, moved: float, elapsed: float) -> Optional[str]:
+        """Why a joint's move since its last message cannot be real motion, or None."""
+        limit = self._max_speed.get(name)
+        if limit is None or abs(moved) <= 1e-9:
+            return None
+        if elapsed < MIN_SAMPLE_INTERVAL:
+            return f"{name} moved {moved:+.3f} rad within one stamp: holding until two states agree"
+        if abs(moved) / elapsed > limit:
+            return (f"{name} moved {moved:+.3f} rad in {elapsed * 1000:.0f} ms ({abs(moved) / elapsed:.1f} rad/s "
+                    f"> {limit:.1f} rad/s, no real motion): holding until two states agree")
+        return None
+
+    def _check(self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float]) -> Optional[str]:
+        if len(positions) != len(names):
+            return f"joint_states has {len(names)} names but {len(positions)} positions"
+        if len(velocities) not in (0, len(names)):
+            return f"joint_states has {len(names)} names but {len(velocities)} velocities"
+        seen = set()
+        for name in names:
+            if name in seen:
+                return f"joint_states names {name} twice: which value is true cannot be known"
+            seen.add(name)
+        try:
+            values = [float(positions[i]) for i, name in enumerate(names) if name in self._known]
+            if len(velocities) == len(names):
+                values += [float(velocities[i]) for i, name in enumerate(names) if name in self._known]
+        except (TypeError, ValueError):
+            return "joint_states holds something that is not a number"
+        if not all(math.isfinite(value) for value in values):
+            return "joint_states positions or velocities contain NaN or inf"
+        return None
+
+    def reading(self) -> Optional[Reading[ArmJointState]]:
+        """The merged state; None before any message; a problem when unusable."""
+        with self._lock:
+            if self._problem is not None:
+                return Reading(None, self._problem[1], self._problem[0])
+            if self._glitch is not None:
+                return Reading(None, self._glitch[1], self._glitch[0])
+            missing = [name for name in self.arm_joint_names if name not in self._joints]
+            if len(missing) == len(self.arm_joint_names):
+                return None  # nothing of the arm yet (the gripper's driver may be first)
+            if missing:
+                newest = max(entry[3] for entry in self._joints.values())
+                return Reading(None, newest, f"joint_states lacks {missing} (no message has named them)")
+            arm = [self._joints[name] for name in self.arm_joint_names]
+            fingers = [self._joints.get(name) for name in self.finger_joint_names]
+        width = sum(f[0] for f in fingers) if fingers and all(f is not None for f in fingers) else None
+        state = ArmJointState(np.array([a[0] for a in arm]), np.array([a[1] for a in arm]), width)
+        # The state is as old as its oldest joint; without stamps on every joint it has none.
+        return Reading(state, min(a[3] for a in arm), stamp=min(a[4] for a in arm))

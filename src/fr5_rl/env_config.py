@@ -1,0 +1,310 @@
+"""``config/env.yaml`` typed: :class:`EnvConfig`, read once and passed down.
+
+The environments, the simulator, the tasks and the deployment step all read these settings, so
+the schema sits in the shared layer beside :mod:`fr5_rl.config`'s loaders rather than in any one
+of them. Dataclasses rather than pydantic: the package's other files (node parameters,
+hyperparameters) already load through :func:`fr5_rl.config.typed`, attribute reads are plain and
+fast on the env's hot path, and no dependency is added. Every default lives in ``env.yaml``; the
+classes here hold none, so a value is written once.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Dict, List, Mapping, Optional, Union
+
+from .config import ConfigError, deep_update, load_robot_spec, load_yaml, typed, whole_multiple
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """``simulation``: physics step, solver and the simulated position controller.
+
+    :param control_dt: s, one env step = one 50 Hz command of the policy node.
+    :param physics_dt: s per physics step; divides ``control_dt``.
+    :param gravity: m/s^2 along base z.
+    :param gripper_force: N the fingers squeeze with.
+    """
+
+    control_dt: float
+    physics_dt: float
+    solver_iterations: int
+    gravity: float
+    arm_position_gain: float
+    arm_velocity_gain: float
+    finger_position_gain: float
+    gripper_force: float
+
+
+@dataclass(frozen=True)
+class TableConfig:
+    """``table`` (base_link, m): the robot stands on it at the origin."""
+
+    top_height: float
+    size: List[float]  # x y thickness
+    center_xy: List[float]
+    lateral_friction: float
+
+
+@dataclass(frozen=True)
+class ObjectConfig:
+    """``object``: the cup (cylinder) or cube, and where it is placed (base_link x y, m)."""
+
+    shape: str
+    radius: float
+    half_extent: float
+    height: float
+    mass: float  # kg
+    lateral_friction: float
+    region_low: List[float]
+    region_high: List[float]
+
+    def check(self, source: str) -> None:
+        if self.shape not in ("cylinder", "box"):
+            raise ConfigError(f"{source}: 'object.shape' must be cylinder or box, got {self.shape!r}")
+        low, high = self.region_low, self.region_high
+        if len(low) != 2 or len(high) != 2 or any(lo >= hi for lo, hi in zip(low, high)):
+            raise ConfigError("object.region_low must be below object.region_high (x y, metres)")
+
+
+@dataclass(frozen=True)
+class ActionConfig:
+    """``action``: joint increment at |action| = 1 (rad) and the command low-pass."""
+
+    max_joint_step: float
+    smoothing_alpha: float
+
+
+@dataclass(frozen=True)
+class JointStepHintConfig:
+    """``observation.joint_step_hint`` (:class:`fr5_rl.observation.JointStepHint`)."""
+
+    cartesian_step: float  # m
+    rotation_step: float  # rad
+    damping: float  # m
+    joint_step_scale: float  # rad read as 1
+
+    def check(self, source: str) -> None:
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if not 0.0 < value < math.inf:
+                raise ConfigError(f"observation.joint_step_hint.{field.name} must be a positive number, got {value!r}")
+
+
+@dataclass(frozen=True)
+class ObservationConfig:
+    """``observation``: normalisation of the observation vector and its optional blocks."""
+
+    tcp_position_low: List[float]  # m, base_link
+    tcp_position_high: List[float]
+    relative_position_scale: float  # m mapped to +-1
+    lift_scale: float  # m mapped to +-1
+    previous_actions: int
+    joint_step_hint: Optional[JointStepHintConfig]
+    joint_velocity_source: str  # measured (the simulator's) | positions (estimated, as behind the FAIRINO driver)
+
+    def check(self, source: str) -> None:
+        if self.joint_velocity_source not in ("measured", "positions"):
+            raise ConfigError(f"observation.joint_velocity_source must be measured or positions, "
+                              f"got {self.joint_velocity_source!r}")
+        if not 0 <= self.previous_actions <= 4:
+            raise ConfigError(f"observation.previous_actions must be a whole number from 0 to 4, "
+                              f"got {self.previous_actions!r}")
+
+
+@dataclass(frozen=True)
+class WorkspaceConfig:
+    """``workspace``: the box (base_link, m) the tcp must stay in."""
+
+    low: List[float]
+    high: List[float]
+
+
+@dataclass(frozen=True)
+class ReachConfig:
+    """``reach``: episode length, success test and start noise of the reach task."""
+
+    simulation: Dict[str, Any]  # overrides of ``simulation`` for this task
+    max_steps: int
+    success_distance: float  # m
+    max_approach_angle_deg: float
+    min_open_width: float  # m
+    start_joint_noise: float  # rad
+
+
+@dataclass(frozen=True)
+class GraspConfig:
+    """``grasp``: episode length, lift and hold of the grasp task."""
+
+    simulation: Dict[str, Any]
+    max_steps: int
+    lift_height: float  # m
+    hold_time: float  # s
+    knocked_over_angle_deg: float
+    start_joint_noise: float  # rad
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """``reward.weights`` of the shaping terms."""
+
+    approach: float
+    orientation: float
+    gripper: float
+    lift: float
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """``reward``: dense (potential-based shaping) or sparse, bonus and penalties."""
+
+    mode: str
+    weights: RewardWeights
+    distance_scale: float  # m
+    orientation_scale: float  # rad
+    potential_gain: float
+    success_bonus: float
+    collision_penalty: float
+    failure_penalty: float
+    action_penalty: float
+
+    def check(self, source: str) -> None:
+        if self.mode not in ("dense", "sparse"):
+            raise ConfigError("reward.mode must be 'dense' or 'sparse'")
+
+
+@dataclass(frozen=True)
+class RandomisationConfig:
+    """``randomisation``: what is drawn per episode (and the in-period timing, per step)."""
+
+    enabled: bool
+    object_size_scale: List[float]
+    object_mass_scale: List[float]
+    friction_scale: List[float]
+    joint_damping: List[float]  # N*m*s/rad
+    action_latency_steps: List[int]  # inclusive range of whole control steps
+    observation_noise_std: float  # m / rad
+    physics_dt_choices: List[float]  # s
+    command_delay_s: List[float]
+    observation_age_s: List[float]
+    timing_share: float
+    plain_episode_share: float
+
+    def check(self, source: str) -> None:
+        if not 0.0 <= self.plain_episode_share < 1.0:
+            raise ConfigError(f"randomisation.plain_episode_share: {self.plain_episode_share} must be in [0, 1)")
+        if not 0.0 <= self.timing_share <= 1.0:
+            raise ConfigError(f"randomisation.timing_share: {self.timing_share} must be in [0, 1]")
+
+
+@dataclass(frozen=True)
+class LinkRadii:
+    """``safety_zone.link_radii`` (m): capsule radius of each link."""
+
+    upperarm: float
+    forearm: float
+    wrist1: float
+    wrist2: float
+    gripper: float
+
+
+@dataclass(frozen=True)
+class SafetyZoneConfig:
+    """``safety_zone``: margins checked on every command before the policy node sends it (m)."""
+
+    table_margin: float
+    tcp_min_height: float
+    self_margin: float
+    link_radii: LinkRadii
+    gripper_length: float
+
+
+TaskConfig = Union[ReachConfig, GraspConfig]
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """``config/env.yaml`` merged with overrides and checked: every section typed.
+
+    Build it with :func:`load_env_config`; :meth:`to_dict` gives the plain form saved in a
+    model's ``meta.json``.
+    """
+
+    simulation: SimulationConfig
+    table: TableConfig
+    object: ObjectConfig
+    action: ActionConfig
+    observation: ObservationConfig
+    workspace: WorkspaceConfig
+    reach: ReachConfig
+    grasp: GraspConfig
+    reward: RewardConfig
+    randomisation: RandomisationConfig
+    safety_zone: SafetyZoneConfig
+
+    def task(self, name: str) -> TaskConfig:
+        """The section of task ``name`` (``reach`` or ``grasp``)."""
+        if name not in ("reach", "grasp"):
+            raise ConfigError(f"unknown task '{name}'; choose reach or grasp")
+        return self.reach if name == "reach" else self.grasp
+
+    def simulation_for(self, task: str) -> SimulationConfig:
+        """``simulation`` with the task's own overrides (``<task>.simulation``) applied."""
+        overrides = self.task(task).simulation
+        known = {field.name for field in dataclasses.fields(SimulationConfig)}
+        unknown = sorted(set(overrides) - known)
+        if unknown:
+            raise ConfigError(f"{task}.simulation: unknown key '{unknown[0]}'; known: {sorted(known)}")
+        return typed(SimulationConfig, {**dataclasses.asdict(self.simulation), **overrides}, f"{task}.simulation")
+
+    def object_rest_z(self, size_scale: float = 1.0) -> float:
+        """z (m, base_link) of the object's centre when it stands upright on the table.
+
+        :param size_scale: the episode's object size factor (1.0 = nominal, as deployed).
+        """
+        obj = self.object
+        half_height = obj.height / 2.0 if obj.shape == "cylinder" else obj.half_extent
+        return self.table.top_height + half_height * size_scale
+
+    def to_dict(self) -> Dict[str, Any]:
+        """Plain JSON-able form (``meta.json`` ``env_config``)."""
+        return dataclasses.asdict(self)
+
+    def check(self, source: str) -> None:
+        """Refuse settings that would break the real robot's limits or the simulation."""
+        for task in ("base", "reach", "grasp"):
+            sim = self.simulation if task == "base" else self.simulation_for(task)
+            if whole_multiple(sim.control_dt, sim.physics_dt) is None:
+                raise ConfigError(f"{task}: simulation.physics_dt ({sim.physics_dt}) must divide control_dt "
+                                  f"({sim.control_dt}) evenly")
+        control_dt = self.simulation.control_dt
+        randomisation = self.randomisation
+        for choice in randomisation.physics_dt_choices:
+            if whole_multiple(control_dt, choice) is None:
+                raise ConfigError(f"randomisation.physics_dt_choices: {choice} must divide control_dt ({control_dt})")
+        for key in ("command_delay_s", "observation_age_s"):
+            low, high = getattr(randomisation, key)
+            if not 0.0 <= low <= high <= control_dt:
+                raise ConfigError(f"randomisation.{key}: [{low}, {high}] must satisfy 0 <= low <= high <= "
+                                  f"control_dt ({control_dt} s): it is a time inside one control period")
+        max_step = self.action.max_joint_step
+        allowed = min(load_robot_spec().velocity_limits) * control_dt
+        if not 0.0 < max_step <= allowed + 1e-12:
+            raise ConfigError(
+                f"action.max_joint_step = {max_step} rad per {control_dt} s step would exceed the "
+                f"FR5 velocity limit; use at most {allowed:.4f} rad (velocity limit x control_dt)")
+        if not 0.0 < self.action.smoothing_alpha <= 1.0:
+            raise ConfigError("action.smoothing_alpha must be in (0, 1]")
+
+
+def load_env_config(overrides: Optional[Mapping[str, Any]] = None, path: Union[str, Path] = "env") -> EnvConfig:
+    """Read ``config/env.yaml`` (or ``path``), merge ``overrides`` and check the result.
+
+    :param overrides: a nested mapping of keys to replace (unknown keys are refused).
+    :raises ConfigError: an unknown key, a missing key, a wrong type or a value out of range;
+        the message names the key.
+    """
+    merged = deep_update(load_yaml(path), overrides)
+    return typed(EnvConfig, merged, "env configuration")

@@ -1,0 +1,151 @@
+"""FR5Env's rewards and step info (dense and sparse), and what the randomisation draws per episode
+(plain episodes, timing shares, the failure penalty). Split from test_envs.py, whose helpers it uses."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fr5_rl.envs import FR5Env
+from test_envs import TASKS, make, run_expert
+
+# ----------------------------------------------------------------------------- rewards / info
+REWARD_PARTS = ("reward_success", "reward_collision", "reward_failure", "reward_progress", "reward_action")
+
+
+def check_info(reward, info):
+    assert "is_success" in info and isinstance(info["is_success"], bool)
+    assert "failure" in info
+    parts = [k for k in info if k.startswith("reward_")]
+    assert set(REWARD_PARTS) <= set(parts)
+    assert sum(info[k] for k in parts) == pytest.approx(reward, abs=1e-9)
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_info_and_reward_parts(task):
+    env = make(task)
+    try:
+        _, info = env.reset(seed=0)
+        assert info["is_success"] is False
+        rng = np.random.default_rng(3)
+        progress = []
+        for _ in range(400):
+            _, reward, terminated, truncated, info = env.step(rng.uniform(-1, 1, 7).astype(np.float32))
+            check_info(reward, info)
+            progress.append(info["reward_progress"])
+            assert info["is_success"] is False or terminated
+            if truncated:
+                assert info["failure"] == "timeout"
+            if terminated or truncated:
+                env.reset()
+        assert np.std(progress) > 0  # the dense reward shapes
+        run_expert(env, 0, on_step=check_info)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_sparse_reward_pays_only_success_and_failures(task):
+    env = make(task, reward={"mode": "sparse", "failure_penalty": 3.0})
+    try:
+        bonus, penalty = env.cfg.reward.success_bonus, env.cfg.reward.collision_penalty
+        other = {None: 0.0, "collision": 0.0, "timeout": 0.0}  # any other failure pays failure_penalty
+        rng = np.random.default_rng(4)
+        env.reset(seed=0)
+        seen = set()
+
+        def check(reward, info):
+            expected = ((bonus if info["is_success"] else 0.0) - (penalty if info["failure"] == "collision" else 0.0)
+                        - other.get(info["failure"], 3.0))
+            assert info["reward_failure"] == -other.get(info["failure"], 3.0)
+            assert reward == expected, (reward, info)
+            assert info["reward_progress"] == 0.0 and info["reward_action"] == 0.0
+            seen.add(expected)
+
+        for _ in range(600):
+            _, reward, terminated, truncated, info = env.step(rng.uniform(-1, 1, 7).astype(np.float32))
+            check(reward, info)
+            if terminated or truncated:
+                env.reset()
+        if task == "reach":
+            assert run_expert(env, 0, on_step=check)["is_success"]
+            assert bonus in seen
+        assert -penalty in seen and 0.0 in seen
+    finally:
+        env.close()
+
+
+def test_success_step_pays_bonus_in_dense_mode():
+    env = make("reach")
+    try:
+        rewards = []
+        info = run_expert(env, 2, on_step=lambda r, i: rewards.append((r, i)))
+        assert info["is_success"]
+        reward, last = rewards[-1]
+        assert last["reward_success"] == env.cfg.reward.success_bonus
+        assert all(i["reward_success"] == 0.0 for _, i in rewards[:-1])
+    finally:
+        env.close()
+
+
+def test_plain_episode_share_draws_some_episodes_without_randomisation():
+    """randomisation.plain_episode_share: that share of episodes runs with none of the
+    perturbations (here: two steps of latency and noise), the rest with all of them."""
+
+    perturbed = {"enabled": True, "action_latency_steps": [2, 2], "observation_noise_std": 0.004}
+    env = FR5Env(task="reach", config={"randomisation": {**perturbed, "plain_episode_share": 0.5}})
+    latencies = []
+    for seed in range(60):
+        env.reset(seed=seed)
+        latencies.append((env._latency_steps, env._obs_noise_std))
+    env.close()
+    assert set(latencies) == {(0, 0.0), (2, 0.004)}
+    plain = sum(latency == (0, 0.0) for latency in latencies)
+    assert 15 <= plain <= 45, plain  # binomial(60, 0.5): outside this 1 time in 10^4
+
+    always = FR5Env(task="reach", config={"randomisation": perturbed})
+    always.reset(seed=0)
+    assert always._latency_steps == 2
+    always.close()
+    from fr5_rl.config import ConfigError
+
+    with pytest.raises(ConfigError, match="plain_episode_share"):
+        FR5Env(task="reach", config={"randomisation": {**perturbed, "plain_episode_share": 1.0}})
+
+
+def test_timing_share_leaves_some_perturbed_episodes_with_whole_step_latency_only():
+    """randomisation.timing_share: that share of the perturbed episodes gets the in-period timing
+    (command delay, observation age); the others keep their latency but no timing, so that "no
+    jitter" never means "no latency" to the policy."""
+    from fr5_rl.config import ConfigError
+
+    perturbed = {"enabled": True, "action_latency_steps": [2, 2], "command_delay_s": [0.0, 0.02],
+                 "observation_age_s": [0.0, 0.01]}
+    env = FR5Env(task="reach", config={"randomisation": {**perturbed, "timing_share": 0.5}})
+    drawn = []
+    for seed in range(60):
+        env.reset(seed=seed)
+        drawn.append((env._latency_steps, env._command_delay_range, env._observation_age_range))
+    env.close()
+    assert set(drawn) == {(2, (0.0, 0.0), (0.0, 0.0)), (2, (0.0, 0.02), (0.0, 0.01))}
+    untimed = sum(d[1] == (0.0, 0.0) for d in drawn)
+    assert 15 <= untimed <= 45, untimed  # binomial(60, 0.5): outside this 1 time in 10^4
+    with pytest.raises(ConfigError, match="timing_share"):
+        FR5Env(task="reach", config={"randomisation": {**perturbed, "timing_share": 1.5}})
+
+
+def test_failure_penalty_is_paid_for_the_tasks_other_failures():
+    from fr5_rl.tasks.base import TaskOutcome
+
+    env = make("grasp", reward={"failure_penalty": 4.0})
+    try:
+        env.reset(seed=0)
+        terms = env.task.terms(env.task_state())
+        for failure, expected in ((None, 0.0), ("collision", 0.0), ("object_knocked_over", -4.0),
+                                  ("object_out_of_reach", -4.0), ("left_workspace", -4.0)):
+            parts = env.task.reward(TaskOutcome(False, failure, terms), [0.0] * 7)
+            assert parts["failure"] == expected, failure
+    finally:
+        env.close()
+    plain = make("grasp")
+    assert plain.task.failure_penalty == 0.0  # off unless configured
+    plain.close()

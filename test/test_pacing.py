@@ -1,0 +1,68 @@
+"""fr5_rl.sim.pacing: simulated time locked to an injected wall clock, and the schedules of the
+simulator node's real-time loop (verdicts, publications, camera frames)."""
+import pytest
+
+from fr5_rl.sim.pacing import AlignedStepSchedule, StepSchedule, TimeSchedule, WallClockPacer
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_the_pacer_runs_the_steps_the_wall_clock_says_are_due():
+    clock = FakeClock()
+    pacer = WallClockPacer(physics_dt=0.005, max_catch_up=10, clock=clock)
+    assert list(pacer.due_steps()) == []  # no time has passed
+    clock.now += 0.005
+    assert list(pacer.due_steps()) == [1]  # step 0 (t = 0) was due at once: run, counted
+    clock.now += 0.0124  # 17.4 ms: simulated time runs to the step within half a step of it, 15 ms
+    assert list(pacer.due_steps()) == [2, 3]
+    assert pacer.sim_time == pytest.approx(0.015)
+    clock.now += 0.0006  # 18 ms: now 20 ms is within half a step
+    assert list(pacer.due_steps()) == [4]
+
+
+def test_a_late_wake_catches_up_at_most_max_catch_up_steps_a_call():
+    clock = FakeClock()
+    pacer = WallClockPacer(physics_dt=0.01, max_catch_up=4, clock=clock)
+    clock.now += 0.1  # ten steps late
+    assert len(list(pacer.due_steps())) == 4
+    assert len(list(pacer.due_steps())) == 4
+    assert len(list(pacer.due_steps())) == 2
+    assert pacer.step == 10
+
+
+def test_a_pacer_hopelessly_behind_resynchronises_instead_of_racing():
+    clock = FakeClock()
+    pacer = WallClockPacer(physics_dt=0.01, max_catch_up=5, max_lag=1.0, clock=clock)
+    clock.now += 3.0  # the loop stalled 3 s
+    assert len(list(pacer.due_steps())) == 5  # 0.05 s run, 2.95 s behind: the lag is dropped
+    assert list(pacer.due_steps()) == []
+    clock.now += 0.02
+    assert len(list(pacer.due_steps())) == 2
+
+
+def test_step_schedule_counts_from_its_restart():
+    schedule = StepSchedule(4)
+    schedule.restart(10)
+    assert [step for step in range(11, 25) if schedule.due(step)] == [14, 18, 22]
+    schedule.restart(22)
+    assert not schedule.due(25) and schedule.due(26)
+
+
+def test_aligned_schedule_stays_on_the_grid_after_a_late_check():
+    schedule = AlignedStepSchedule(4)
+    assert schedule.due(0)
+    assert not schedule.due(3)
+    assert schedule.due(6)  # late: due, and the next one is back on the grid at 8
+    assert not schedule.due(7) and schedule.due(8)
+
+
+def test_time_schedule_is_due_once_per_period_from_its_last_due_time():
+    schedule = TimeSchedule(0.1)
+    due = [round(k * 0.02, 2) for k in range(16) if schedule.due(k * 0.02)]
+    assert due == [0.0, 0.1, 0.2, 0.3]

@@ -1,0 +1,436 @@
+#!/usr/bin/env python3
+"""Benchmarks of fr5_rl: environment speed and policy inference latency (`make bench`).
+
+    python tools/bench/env_and_inference.py            # full: 5000 steps x 3 repeats per task, 5000 inference calls
+    python tools/bench/env_and_inference.py --quick    # smoke run: 1000 steps x 3 repeats, 1000 calls
+    python tools/bench/env_and_inference.py --model runs/reach_ppo_x/final
+
+Environment speed, for FR5Reach-v0 and FR5Grasp-v0 in one process: random actions in
+[-1, 1] with a reset whenever an episode ends (resets are part of the timed loop, warm-up
+steps are not), median of the repeats:
+
+- env steps/s and the real-time factor (steps * control_dt / wall seconds);
+- overhead over bare PyBullet: the env's time divided by the time bare PyBullet takes for
+  the same physics. Every command the env sent is recorded (an untimed second run: episodes
+  are seeded one by one, so it is the same run) and replayed on the same world, per control
+  step one ``setJointMotorControlArray`` and ``substeps`` ``stepSimulation`` calls, nothing
+  else; the replay ends with the joints the env ended with (the deviation is reported). The
+  env's time includes its resets, the replay's does not;
+- for comparison, ``stepSimulation`` of the scene at rest right after a reset (nothing moves,
+  the object sleeps), which is cheaper than the moving scene the env simulates;
+- the floor: the replay plus the four simulator queries every step needs (joints, tcp link,
+  object pose, contacts), their results unused.
+
+Inference latency of a model directory (default models/reach; skipped when absent): p50/p99
+of single-observation ``Policy.act`` calls through ``fr5_rl.deploy.policy.load_policy`` for the torch
+and onnx backends (the onnx graph is exported into a temporary copy when the directory has
+none). Observations come from rollouts in the model's own environment.
+
+Targets are printed as met / not met, never asserted. Results go to
+bench/results/env_speed.json and bench/results/inference.json (each with its "verdicts"), and
+this bench's entries of bench/results/summary.json are replaced (the other benches' are kept;
+see tools/bench/benchlib.py). Only time.perf_counter is used for timing.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+import numpy as np
+
+from benchlib import (AT_LEAST, AT_MOST, REPO, RESULTS_DIR, latency_ms, machine_info, pass_fail, relative_path,
+                      update_summary, verdict, write_result)
+
+TARGETS = {
+    "FR5Reach-v0": {"real_time_factor": 100.0},
+    "FR5Grasp-v0": {"real_time_factor": 50.0},
+    "overhead_max": 1.3,
+    "onnx_p99_ms_max": 0.2,
+}
+
+
+def env_verdicts(environments: Dict[str, Dict[str, Any]]) -> Dict[str, Dict[str, Any]]:
+    """Per environment: real-time factor at least its target, overhead at most 1.3x."""
+    verdicts = {}
+    for env_id, r in sorted(environments.items()):
+        verdicts[f"{env_id}.real_time_factor"] = verdict(
+            r["real_time_factor"], TARGETS[env_id]["real_time_factor"], AT_LEAST, "x", f"{env_id} real-time factor")
+        verdicts[f"{env_id}.overhead"] = verdict(
+            r["overhead"], TARGETS["overhead_max"], AT_MOST, "x", f"{env_id} env time / bare PyBullet")
+    return verdicts
+
+
+def inference_verdicts(result: Dict[str, Any]) -> Dict[str, Dict[str, Any]]:
+    """onnx p99 at most 0.2 ms; none when the bench was skipped."""
+    if result.get("skipped"):
+        return {}
+    return {"onnx_p99_ms": verdict(result["backends"]["onnx"]["p99_ms"], TARGETS["onnx_p99_ms_max"], AT_MOST, "ms",
+                                   f"{result.get('task')} policy inference (onnx) p99")}
+
+
+# ----------------------------------------------------------------------------- env speed
+def run_seeded_episodes(env, actions: np.ndarray, first_seed: int) -> List[int]:
+    """Step ``env`` through ``actions``, resetting with seeds first_seed, first_seed + 1, ...
+    whenever an episode ends; returns the seeds used. Every start is reproducible, which is
+    what lets the bare replay rebuild it."""
+    seeds = [first_seed]
+    step, reset = env.step, env.reset
+    reset(seed=first_seed)
+    for action in actions:
+        _, _, terminated, truncated, _ = step(action)
+        if terminated or truncated:
+            seeds.append(seeds[-1] + 1)
+            reset(seed=seeds[-1])
+    return seeds
+
+
+def record_episodes(env, actions: np.ndarray, first_seed: int) -> List[Dict[str, Any]]:
+    """The same run as :func:`run_seeded_episodes`, untimed, recording every arm and gripper
+    command the env sends and the joint angles each episode ends with."""
+    robot = env.robot
+    original = robot.command
+    episodes: List[Dict[str, Any]] = []
+
+    def recording(joint_targets, opening_width, period=None):
+        episodes[-1]["commands"].append((list(joint_targets), opening_width))
+        original(joint_targets, opening_width, period)
+
+    original_reset = env.reset
+
+    def reset(seed=None, options=None):
+        if episodes:
+            episodes[-1]["final_joint_positions"] = env.joint_positions()
+        episodes.append({"seed": seed, "commands": []})
+        result = original_reset(seed=seed, options=options)
+        episodes[-1]["commands"].clear()  # reset's own hold command: the replay's reset sends it
+        return result
+
+    robot.command, env.reset = recording, reset
+    try:
+        run_seeded_episodes(env, actions, first_seed)
+        episodes[-1]["final_joint_positions"] = env.joint_positions()
+    finally:
+        del robot.command, env.reset  # back to the class methods
+    return episodes
+
+
+def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False) -> Dict[str, float]:
+    """Bare PyBullet doing the env's physics: per control step one motor command and
+    ``substeps`` ``stepSimulation`` calls, nothing else. Each episode's start is rebuilt with
+    the env's own seeded reset (not timed). Returns the timed seconds and how far the replayed
+    joints ended from the env's (rad), which shows the replay is the same motion.
+
+    ``with_queries`` adds, per control step, the four state queries any environment of this
+    task needs (joint states, tcp link state, object pose, the robot's contacts) and does
+    nothing with their results: the floor a Python environment on PyBullet can reach."""
+    import pybullet as p
+
+    client, substeps = env.world.client, env.world.substeps
+    command, step_simulation, perf = env.robot.command, p.stepSimulation, time.perf_counter
+    body, joints, tcp = env.robot.body, env.robot.all_joints, env.robot.tcp_link
+    get_joints, get_link, get_pose, get_contacts = (
+        p.getJointStates, p.getLinkState, p.getBasePositionAndOrientation, p.getContactPoints)
+    seconds, deviation = 0.0, 0.0
+    for episode in episodes:
+        env.reset(seed=episode["seed"])
+        commands = episode["commands"]
+        obj = env.world.object_id
+        t0 = perf()
+        for joint_targets, opening_width in commands:
+            command(joint_targets, opening_width)
+            for _ in range(substeps):
+                step_simulation(physicsClientId=client)
+            if with_queries:
+                get_joints(body, joints, physicsClientId=client)
+                get_link(body, tcp, computeForwardKinematics=1, physicsClientId=client)
+                get_pose(obj, physicsClientId=client)
+                get_contacts(bodyA=body, physicsClientId=client)
+        seconds += perf() - t0
+        deviation = max(deviation, float(np.max(np.abs(env.joint_positions() - episode["final_joint_positions"]))))
+    return {"seconds": seconds, "max_final_joint_deviation_rad": deviation}
+
+
+def resting_step_seconds(env, steps: int, seed: int) -> float:
+    """``stepSimulation`` of the scene right after a reset with nothing moving (the arm holds
+    its start, the object sleeps): the floor the physics engine has, shown for comparison."""
+    import pybullet as p
+
+    client = env.world.client
+    env.reset(seed=seed)
+    state = p.saveState(physicsClientId=client)
+    step_simulation, perf = p.stepSimulation, time.perf_counter
+    t0 = perf()
+    for _ in range(steps * env.world.substeps):
+        step_simulation(physicsClientId=client)
+    seconds = perf() - t0
+    p.restoreState(stateId=state, physicsClientId=client)
+    p.removeState(state, physicsClientId=client)
+    return seconds
+
+
+def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0) -> Dict[str, Any]:
+    from fr5_rl.envs import FR5Env
+
+    task = {"FR5Reach-v0": "reach", "FR5Grasp-v0": "grasp"}[env_id]
+    env = FR5Env(task=task)
+    substeps = env.world.substeps
+    rng = np.random.default_rng(seed)
+    actions = rng.uniform(-1.0, 1.0, size=(steps + warmup, 7)).astype(np.float32)
+    timed_actions = actions[warmup:]
+
+    # Time spent in the world's physics stepping during env.step (diagnostic: the rest of the
+    # step is Python, observation and task code). Taken in the recording run, so that the
+    # timed run carries no instrumentation.
+    world_step = env.world.step
+    physics_clock = [0.0]
+
+    def timed_world_step() -> None:
+        t = time.perf_counter()
+        world_step()
+        physics_clock[0] += time.perf_counter() - t
+
+    per_repeat = []
+    for repeat in range(repeats):
+        first_seed = seed + 100_000 * repeat
+        run_seeded_episodes(env, actions[:warmup], first_seed + 50_000)  # warm-up, not timed
+        t0 = time.perf_counter()
+        seeds = run_seeded_episodes(env, timed_actions, first_seed)
+        env_s = time.perf_counter() - t0
+
+        env.world.step = timed_world_step
+        physics_clock[0] = 0.0
+        episodes = record_episodes(env, timed_actions, first_seed)
+        physics_s = physics_clock[0]
+        del env.world.step
+        if [e["seed"] for e in episodes] != seeds or sum(len(e["commands"]) for e in episodes) != steps:
+            raise RuntimeError("the recording run differs from the timed run: the environment is not deterministic")
+        replay = replay_bare(env, episodes)
+        floor = replay_bare(env, episodes, with_queries=True)
+        resting_s = resting_step_seconds(env, steps, first_seed)
+        per_repeat.append({
+            "env_seconds": round(env_s, 4),
+            "episodes": len(seeds),
+            "steps_per_s": steps / env_s,
+            "real_time_factor": steps * env.control_dt / env_s,
+            "env_step_us": 1e6 * env_s / steps,
+            "physics_in_env_step_us": 1e6 * physics_s / steps,
+            "python_in_env_step_us": 1e6 * (env_s - physics_s) / steps,
+            "bare_replay_seconds": round(replay["seconds"], 4),
+            "bare_replay_step_us": 1e6 * replay["seconds"] / steps,
+            "bare_replay_max_final_joint_deviation_rad": replay["max_final_joint_deviation_rad"],
+            "overhead": env_s / replay["seconds"],
+            "bare_replay_with_queries_step_us": 1e6 * floor["seconds"] / steps,
+            "overhead_floor_with_queries": floor["seconds"] / replay["seconds"],
+            "resting_physics_substep_us": 1e6 * resting_s / (steps * substeps),
+            "overhead_over_resting_scene": env_s / resting_s,
+        })
+
+    control_dt = env.control_dt
+    env.close()
+
+    def median(key: str) -> float:
+        return float(statistics.median(r[key] for r in per_repeat))
+
+    rtf = median("real_time_factor")
+    overhead = median("overhead")
+    met = env_verdicts({env_id: {"real_time_factor": rtf, "overhead": overhead}})
+    return {
+        "env_id": env_id,
+        "steps_per_repeat": steps,
+        "repeats": repeats,
+        "warmup_steps": warmup,
+        "control_dt": control_dt,
+        "substeps": substeps,
+        "steps_per_s": median("steps_per_s"),
+        "real_time_factor": rtf,
+        "env_step_us": median("env_step_us"),
+        "physics_in_env_step_us": median("physics_in_env_step_us"),
+        "python_in_env_step_us": median("python_in_env_step_us"),
+        "bare_replay_step_us": median("bare_replay_step_us"),
+        "overhead": overhead,
+        "bare_replay_with_queries_step_us": median("bare_replay_with_queries_step_us"),
+        "overhead_floor_with_queries": median("overhead_floor_with_queries"),
+        "resting_physics_substep_us": median("resting_physics_substep_us"),
+        "overhead_over_resting_scene": median("overhead_over_resting_scene"),
+        "per_repeat": per_repeat,
+        "targets": {
+            "real_time_factor_min": TARGETS[env_id]["real_time_factor"],
+            "real_time_factor": pass_fail(met[f"{env_id}.real_time_factor"]),
+            "overhead_max": TARGETS["overhead_max"],
+            "overhead": pass_fail(met[f"{env_id}.overhead"]),
+        },
+    }
+
+
+# ----------------------------------------------------------------------------- inference
+def rollout_observations(task: str, env_overrides: Dict[str, Any], count: int, seed: int = 7) -> np.ndarray:
+    """``count`` raw observations from random-action rollouts of the model's environment."""
+    from fr5_rl.envs import FR5Env
+
+    env = FR5Env(task=task, config=env_overrides or None)
+    rng = np.random.default_rng(seed)
+    obs, _ = env.reset(seed=seed)
+    observations = []
+    while len(observations) < count:
+        observations.append(obs.copy())
+        obs, _, terminated, truncated, _ = env.step(rng.uniform(-1, 1, 7).astype(np.float32))
+        if terminated or truncated:
+            obs, _ = env.reset()
+    env.close()
+    return np.stack(observations)
+
+
+def time_calls(act, observations: np.ndarray, calls: int, warmup: int = 200) -> Dict[str, float]:
+    perf = time.perf_counter
+    n = len(observations)
+    for i in range(warmup):
+        act(observations[i % n])
+    samples = np.empty(calls)
+    for i in range(calls):
+        obs = observations[i % n]
+        t0 = perf()
+        act(obs)
+        samples[i] = perf() - t0
+    return {"calls": calls, **latency_ms(samples, points=(50, 90, 99), mean=True)}
+
+
+def bench_inference(model_dir: Optional[Path], calls: int) -> Dict[str, Any]:
+    if model_dir is None or not model_dir.is_dir():
+        return {"skipped": True, "reason": f"no model directory at {model_dir}"}
+    from fr5_rl.deploy.bundle import ONNX_FILE, ModelFilesError
+    from fr5_rl.deploy.policy import load_policy
+
+    result: Dict[str, Any] = {"model_dir": relative_path(model_dir), "backends": {}}
+    work = model_dir
+    tmp = None
+    try:
+        torch_policy = load_policy(model_dir, "torch")
+    except ModelFilesError as error:
+        return {"skipped": True, "reason": str(error), "model_dir": relative_path(model_dir)}
+    observations = rollout_observations(torch_policy.task, torch_policy.meta.get("env_overrides", {}),
+                                        min(calls, 2000))
+    result.update({"task": torch_policy.task, "algo": torch_policy.meta.get("algo"),
+                   "observation_size": torch_policy.observation_size})
+    result["backends"]["torch"] = time_calls(torch_policy.act, observations, calls)
+    try:
+        if not (model_dir / ONNX_FILE).is_file():
+            from fr5_rl.training.onnx_export import export
+
+            tmp = Path(tempfile.mkdtemp(prefix="fr5_bench_"))
+            work = tmp / model_dir.name
+            shutil.copytree(model_dir, work)
+            export(work)
+            result["onnx_exported_to_temporary_copy"] = True
+        onnx_policy = load_policy(work, "onnx")
+        result["backends"]["onnx"] = time_calls(onnx_policy.act, observations, calls)
+        worst = max(float(np.max(np.abs(torch_policy.act(o) - onnx_policy.act(o)))) for o in observations[:500])
+        result["onnx_max_abs_action_difference"] = worst
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+    result["targets"] = {"onnx_p99_ms_max": TARGETS["onnx_p99_ms_max"],
+                         "onnx_p99": pass_fail(inference_verdicts(result)["onnx_p99_ms"])}
+    return result
+
+
+# ----------------------------------------------------------------------------- output
+def print_env_table(rows: List[Dict[str, Any]]) -> None:
+    header = (f"{'environment':<13} {'steps/s':>9} {'x real time':>12} {'target':>7}  "
+              f"{'env step':>9} {'bare replay':>12} {'overhead':>9} {'target':>7}")
+    print(header)
+    print("-" * len(header))
+    verdicts = env_verdicts({r["env_id"]: r for r in rows})
+    for r in rows:
+        rtf, overhead = (verdicts[f"{r['env_id']}.{key}"]["verdict"] for key in ("real_time_factor", "overhead"))
+        print(f"{r['env_id']:<13} {r['steps_per_s']:>9.0f} {r['real_time_factor']:>11.1f}x "
+              f"{rtf:>7}  {r['env_step_us']:>7.0f}us {r['bare_replay_step_us']:>10.0f}us "
+              f"{r['overhead']:>8.2f}x {overhead:>7}")
+    for r in rows:
+        print(f"{r['env_id']}: of {r['env_step_us']:.0f}us per env step (resets included), "
+              f"{r['physics_in_env_step_us']:.0f}us are physics ({r['substeps']} substeps) and "
+              f"{r['python_in_env_step_us']:.0f}us the rest (commands, state queries, observation, task, resets); "
+              f"the resting scene steps in {r['resting_physics_substep_us']:.0f}us per substep "
+              f"({r['overhead_over_resting_scene']:.2f}x); the replay plus the four state queries an "
+              f"env needs takes {r['bare_replay_with_queries_step_us']:.0f}us "
+              f"({r['overhead_floor_with_queries']:.2f}x, the floor for a Python env)")
+    print(f"targets: reach >= {TARGETS['FR5Reach-v0']['real_time_factor']:.0f}x real time, grasp >= "
+          f"{TARGETS['FR5Grasp-v0']['real_time_factor']:.0f}x, overhead <= {TARGETS['overhead_max']}x "
+          "(env time / time of bare PyBullet replaying the same commands: one motor call and the "
+          "substeps per control step); median of repeats")
+
+
+def print_inference_table(result: Dict[str, Any]) -> None:
+    if result.get("skipped"):
+        print(f"inference latency: skipped ({result['reason']})")
+        return
+    print(f"inference latency, {result['model_dir']} ({result['task']}, {result['algo']}), single observation:")
+    header = f"{'backend':<8} {'p50':>9} {'p90':>9} {'p99':>9} {'mean':>9} {'max':>9}  target"
+    print(header)
+    print("-" * len(header))
+    for backend, s in result["backends"].items():
+        target = inference_verdicts(result)["onnx_p99_ms"]["verdict"] if backend == "onnx" else ""
+        print(f"{backend:<8} {s['p50_ms']:>7.3f}ms {s['p90_ms']:>7.3f}ms {s['p99_ms']:>7.3f}ms "
+              f"{s['mean_ms']:>7.3f}ms {s['max_ms']:>7.3f}ms  {target}")
+    print(f"target: onnx p99 <= {TARGETS['onnx_p99_ms_max']} ms; max |action torch - onnx| = "
+          f"{result.get('onnx_max_abs_action_difference', float('nan')):.1e}")
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="1000 steps per repeat, 1000 inference calls")
+    parser.add_argument("--steps", type=int, default=None, help="timed env steps per repeat (default 5000)")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--warmup", type=int, default=300, help="untimed env steps before each repeat")
+    parser.add_argument("--calls", type=int, default=None, help="inference calls per backend (default 5000)")
+    parser.add_argument("--model", type=Path, default=None, help="model directory (default models/reach)")
+    parser.add_argument("--skip-env", action="store_true")
+    parser.add_argument("--skip-inference", action="store_true")
+    parser.add_argument("--results", type=Path, default=RESULTS_DIR,
+                        help="output directory (default bench/results); its summary.json is updated")
+    args = parser.parse_args(argv)
+    steps = args.steps or (1000 if args.quick else 5000)
+    calls = args.calls or (1000 if args.quick else 5000)
+
+    written: List[Path] = []
+    machine = machine_info()
+    print(f"machine: {machine['cpu']}, {machine['cores']} cores ({machine['cores_usable']} usable), "
+          f"load {machine.get('load_average_1min_at_start', '?')}; python {machine['python']}, "
+          f"pybullet {machine.get('pybullet', '?')}")
+    if not args.skip_env:
+        rows = [bench_env(env_id, steps, args.repeats, args.warmup) for env_id in ("FR5Reach-v0", "FR5Grasp-v0")]
+        print()
+        print_env_table(rows)
+        environments = {r["env_id"]: r for r in rows}
+        env_result = {"quick": args.quick, "machine": machine, "environments": environments}
+        if hasattr(os, "getloadavg"):
+            env_result["machine"] = dict(machine, load_average_1min_at_end=round(os.getloadavg()[0], 2))
+        written.append(write_result(args.results / "env_speed.json", env_result, env_verdicts(environments)))
+    if not args.skip_inference:
+        model_dir = args.model or (REPO / "models" / "reach")
+        if args.model is None and not model_dir.is_dir():
+            print(f"\ninference latency: skipped, {relative_path(model_dir)} does not exist "
+                  "(train one or pass --model DIR)")
+            result: Dict[str, Any] = {"skipped": True, "reason": f"{relative_path(model_dir)} does not exist"}
+        else:
+            result = bench_inference(model_dir, calls)
+            print()
+            print_inference_table(result)
+        result.update({"quick": args.quick, "machine": machine})
+        written.append(write_result(args.results / "inference.json", result, inference_verdicts(result)))
+    for path in list(written):
+        summary = update_summary(args.results, path.stem, path)
+    if written:
+        written.append(summary)
+    print(f"\nwrote {', '.join(os.path.relpath(path) for path in written)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

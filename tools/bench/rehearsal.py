@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""The real chain rehearsed, measured on unseen placements: each model through each chain over N
+episodes of ``sim_policy.launch``, real time, on its own ROS master.
+
+Chains (``--chains``):
+
+- ``fairino``: the FAIRINO driver profile (50 Hz j1..j6 joint states, velocities 0.0, 125 Hz
+  servo cycle, no teleport: every episode begins with the policy node's start move), the gripper
+  through the bridge and the simulator's emulation of the controller's XML-RPC;
+- ``fairino_vision``: the same, the target through the simulated RealSense and the detector
+  (the whole rehearsal);
+- ``vision``: the target through camera and detector on the default driver.
+
+Prints and writes ``rehearsal.json``: per model and chain, K/N with its 95 % Wilson interval and
+the failure causes and the seeds.
+
+    python tools/bench/rehearsal.py --models models/reach --chains fairino_vision --episodes 20 --seed 900000
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+from benchlib import RESULTS_DIR, machine_info, update_summary, write_result
+from fr5_rl.deploy.bundle import read_meta
+from fr5_rl.training.evaluation import wilson_interval
+from roslaunch_run import run_launch
+
+CHAINS = {
+    "fairino": {"driver": "fairino"},
+    "fairino_vision": {"driver": "fairino", "vision": True},
+    "vision": {"vision": True},
+}
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--models", nargs="+", default=["models/reach"], help="model directories (default models/reach)")
+    parser.add_argument("--chains", nargs="+", choices=sorted(CHAINS), default=["fairino", "fairino_vision"])
+    parser.add_argument("--episodes", type=int, default=20)
+    parser.add_argument("--seed", type=int, default=900_000, help="episode k places the object with seed + k")
+    parser.add_argument("--port", type=int, default=11470)
+    parser.add_argument("--results", type=Path, default=RESULTS_DIR)
+    args = parser.parse_args(argv)
+    rows: List[Dict[str, Any]] = []
+    for model in args.models:
+        task = read_meta(Path(model))["task"]  # the simulator judges the model's own task
+        for chain in args.chains:
+            arguments = {"rviz": False, "model": model, "task": task, "episodes": args.episodes,
+                         "seed": args.seed, **CHAINS[chain]}
+            run = run_launch(arguments, port=args.port, episodes=args.episodes)
+            causes: Dict[str, int] = {}
+            for cause in run.failures:
+                causes[cause] = causes.get(cause, 0) + 1
+            row = {"model": model, "chain": chain, "successes": run.successes, "episodes": run.episodes,
+                   "success_rate_95ci": [round(bound, 3) for bound in wilson_interval(run.successes, run.episodes)], "failures": causes,
+                   "seeds": [args.seed, args.seed + args.episodes - 1], "wall_s": round(run.wall_s, 1),
+                   "timed_out": run.timed_out, "records": run.records}
+            rows.append(row)
+            print(f"{model:24s} {chain:15s} {run.successes}/{run.episodes}  95% CI {row['success_rate_95ci']}  "
+                  f"failures {causes or '-'}  ({run.wall_s:.0f} s)", flush=True)
+    args.results.mkdir(parents=True, exist_ok=True)
+    path = args.results / "rehearsal.json"
+    write_result(path, {"bench": "rehearsal", "machine": machine_info(), "episodes": args.episodes,
+                        "seed": args.seed, "runs": rows})
+    update_summary(args.results, "rehearsal", path)
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

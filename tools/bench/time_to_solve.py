@@ -1,0 +1,142 @@
+"""Time-to-solve benchmark: wall-clock from start until the evaluation success rate first
+reaches the target, on this machine, for the shipped configuration, over several seeds.
+
+    python tools/bench/time_to_solve.py                          # reach: PPO, config/ppo_reach.yaml, seeds 1 2 3
+    python tools/bench/time_to_solve.py --seeds 4 5 --hyperparams my_reach.yaml
+    python tools/bench/time_to_solve.py --task grasp             # grasp: DAgger, config/dagger_grasp.yaml, target 90 %
+
+Runs the real training command (``scripts/train.py`` or ``scripts/imitate.py``, as a
+subprocess, one seed after the other) in a temporary run directory (reach stops at success),
+then writes bench/results/time_to_solve_<task>.json (every seed's evaluation history, the median
+and the worst) and a learning-curve plot beside it, and updates summary.json.
+Targets: reach median <= 60 s, grasp <= 2 h.
+"""
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+from benchlib import AT_MOST, REPO, RESULTS_DIR, update_summary, verdict, write_result
+
+# task -> (seconds allowed, evaluation success that counts as solved)
+TARGETS = {"reach": (60, 0.95), "grasp": (2 * 3600, 0.90)}
+DEFAULT_SEEDS = {"reach": [1, 2, 3], "grasp": [1]}
+# How often reach is evaluated, not how it trains: every 10 k steps, once half of the training
+# episodes since the last evaluation succeeded (the deterministic evaluation stands at 0 % long
+# before that, and 40 episodes of an untrained policy cost 4.3 s, about 6,000 training steps).
+REACH_EVALUATION = ["--eval-freq", "10000", "--eval-min-training-success", "0.5"]
+
+
+def time_to_solve_verdicts(result: Dict[str, Any]) -> Dict[str, Dict[str, Any]]:
+    """Median time to solve at most the task's target; a seed that never solved counts as never
+    (so the median is None, not met, once half the seeds fail)."""
+    what = f"{result['task']} median time to {result['target_success']:.0%} success over {len(result['seeds'])} seeds"
+    return {"time_to_solve_s": verdict(result.get("time_to_solve_s"), result["target_s"], AT_MOST, "s", what)}
+
+
+def median_and_worst(times: List[Optional[float]]):
+    """(median, worst) of the seeds' times to solve; an unsolved seed is infinitely slow."""
+    ordered = sorted(float("inf") if t is None else t for t in times)
+    median = statistics.median(ordered)
+    finite = lambda value: None if value == float("inf") else value  # noqa: E731
+    return finite(median), finite(ordered[-1])
+
+
+def plot_curves(runs: List[Dict[str, Any]], target: float, path: Path, title: str) -> None:
+    """Evaluation success against steps and against wall time, one line per seed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, (by_steps, by_time) = plt.subplots(1, 2, figsize=(10, 3.6))
+    for run in runs:
+        history = run["eval_history"]
+        label = f"seed {run['seed']}"
+        by_steps.plot([h["timesteps"] for h in history], [h["success_rate"] for h in history], marker=".", label=label)
+        by_time.plot([h["wall_s"] for h in history], [h["success_rate"] for h in history], marker=".", label=label)
+    for axis, xlabel in ((by_steps, "environment steps"), (by_time, "wall time (s)")):
+        axis.axhline(target, color="grey", linestyle="--", linewidth=0.8)
+        axis.set_xlabel(xlabel)
+        axis.set_ylabel("evaluation success")
+        axis.set_ylim(-0.02, 1.02)
+        axis.grid(alpha=0.3)
+    by_steps.legend(loc="lower right")
+    figure.suptitle(title)
+    figure.tight_layout()
+    figure.savefig(path, dpi=90)
+    plt.close(figure)
+
+
+def run_seed(task: str, seed: int, target_rate: float, hyperparams: Optional[Path]) -> Dict[str, Any]:
+    """One training run from scratch; its time and steps to solve and its evaluation history."""
+    run_dir = Path(tempfile.mkdtemp(prefix=f"fr5_bench_{task}_{seed}_"))
+    if task == "reach":
+        command = [sys.executable, str(REPO / "scripts" / "train.py"), "--task", "reach", "--run-dir", str(run_dir),
+                   "--seed", str(seed), "--stop-at-success", "--target-success", str(target_rate), "--no-progress",
+                   *REACH_EVALUATION]
+        if hyperparams is not None:
+            command += ["--hyperparams", str(hyperparams)]
+    else:
+        command = [sys.executable, str(REPO / "scripts" / "imitate.py"), "--task", "grasp", "--run-dir", str(run_dir),
+                   "--seed", str(seed)]
+    start = time.time()
+    subprocess.run(command, check=True, cwd=REPO)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    if task == "reach":
+        solved_s, solved_steps = summary.get("time_to_solve_s"), summary.get("timesteps_to_solve")
+        history = summary.get("eval_history", [])
+    else:
+        history = [{"timesteps": h["samples"], "wall_s": h["wall_s"], "success_rate": h.get("eval_success", 0.0)}
+                   for h in summary["history"]]
+        solved = [h for h in history if h["success_rate"] >= target_rate]
+        solved_s = solved[0]["wall_s"] if solved else None
+        solved_steps = solved[0]["timesteps"] if solved else None
+    # The command as a reader would type it: no interpreter or temporary-directory paths.
+    shown = [Path(c).name if i < 2 else ("RUN_DIR" if c == str(run_dir) else c) for i, c in enumerate(command)]
+    print(f"seed {seed}: solved in {solved_s} s, {solved_steps} steps (run directory {run_dir})")
+    return {"seed": seed, "command": " ".join(shown), "time_to_solve_s": solved_s,
+            "steps_or_samples_to_solve": solved_steps, "wall_time_total_s": round(time.time() - start, 1),
+            "n_envs": summary.get("n_envs"), "machine": summary.get("machine"),
+            "evaluations_skipped": summary.get("evaluations_skipped"), "eval_history": history}
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--task", choices=["reach", "grasp"], default="reach")
+    parser.add_argument("--seeds", type=int, nargs="+", default=None, help="default: 1 2 3 (reach), 1 (grasp)")
+    parser.add_argument("--hyperparams", type=Path, default=None,
+                        help="reach: a hyperparameter YAML instead of config/ppo_reach.yaml")
+    parser.add_argument("--results", type=Path, default=RESULTS_DIR,
+                        help="output directory (default bench/results); its summary.json is updated")
+    args = parser.parse_args(argv)
+    target_s, target_rate = TARGETS[args.task]
+    seeds = args.seeds or DEFAULT_SEEDS[args.task]
+    runs = [run_seed(args.task, seed, target_rate, args.hyperparams) for seed in seeds]
+    median_s, worst_s = median_and_worst([run["time_to_solve_s"] for run in runs])
+    steps = [run["steps_or_samples_to_solve"] for run in runs]
+    result = {"task": args.task, "seeds": seeds, "target_success": target_rate, "target_s": target_s,
+              "hyperparams": str(args.hyperparams) if args.hyperparams else None,
+              "time_to_solve_s": median_s, "worst_time_to_solve_s": worst_s,
+              "steps_to_solve_median": median_and_worst(steps)[0], "solved_seeds": sum(s is not None for s in steps),
+              "runs": runs, "machine": runs[0]["machine"],
+              "pass": median_s is not None and median_s <= target_s}
+    verdicts = time_to_solve_verdicts(result)
+    path = write_result(args.results / f"time_to_solve_{args.task}.json", result, verdicts)
+    plot = path.with_suffix(".png")
+    plot_curves(runs, target_rate, plot, f"{args.task}: evaluation success, {len(seeds)} seeds")
+    summary_path = update_summary(args.results, path.stem, path)
+    print(f"time to solve {args.task} over seeds {seeds}: median {median_s} s, worst {worst_s} s to "
+          f"{target_rate:.0%} (target {target_s:.0f} s): {verdicts['time_to_solve_s']['verdict']}")
+    print(f"wrote {os.path.relpath(path)}, {os.path.relpath(plot)}, {os.path.relpath(summary_path)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
