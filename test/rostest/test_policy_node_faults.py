@@ -197,8 +197,14 @@ class TestPolicyNodeFaults(unittest.TestCase):
 
         # Far from the training start (an operator moved the arm): a new episode is refused with
         # the distance; ~go_to_start moves it there slowly, then the policy runs again.
+        # The operator moves it with the node disabled: a command already on its way would
+        # otherwise carry the arm back toward where the policy had it.
+        self.assertTrue(enable(False).success)
+        rospy.sleep(0.2)
         with world.lock:
             world.positions = spec.home_joint_positions + np.array([0.4, -0.2, 0.0, 0.0, 0.0, 0.0])
+        rospy.sleep(0.2)
+        self.assertTrue(enable(True).success)
         reset, go_to_start = (rospy.ServiceProxy(f"/fr5_policy/{name}", Trigger) for name in ("reset", "go_to_start"))
         answer = reset()
         self.assertFalse(answer.success)
