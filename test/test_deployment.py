@@ -9,7 +9,7 @@ from fr5_rl.config import load_robot_spec
 from fr5_rl.env_config import load_env_config
 from fr5_rl.deploy.bundle import ModelFilesError
 from fr5_rl.deploy.deployment import Command, DeploymentStep, Hold, HoldReason, SafetyGate, StepInputs
-from fr5_rl.deploy.joint_state import ArmJointState, JointStateReader, Reading
+from fr5_rl.deploy.joint_state import ArmJointState, JointStateReader, Reading, velocities_from_positions
 from fr5_rl.deploy.policy import Policy
 
 ROBOT = load_robot_spec()
@@ -447,3 +447,13 @@ def test_an_evaluation_keeps_the_settings_the_policy_depends_on_and_nothing_else
                                                    "action": {"smoothing_alpha": 0.6},
                                                    "simulation": {"control_dt": 0.02}}
     assert Policy({**meta, "env_overrides": {}}).deployment_overrides() == {}
+
+
+@pytest.mark.parametrize("driver, trained, estimated", [
+    ("driver", "measured", False),   # true velocities, a policy trained on true ones
+    ("positions", "measured", True),  # the FAIRINO driver's 0.0: estimate whatever the policy saw
+    ("driver", "positions", True),    # a policy trained on the estimate gets it behind every driver
+    ("positions", "positions", True),
+])
+def test_the_node_estimates_velocities_when_the_driver_or_the_training_says_so(driver, trained, estimated):
+    assert velocities_from_positions(driver, trained) is estimated

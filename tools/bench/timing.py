@@ -1,41 +1,58 @@
-"""The real-time loop's timing, emulated in one process: how a model fares behind a driver.
+"""The rehearsal's chain, emulated in one process: how a model fares behind a driver.
 
     python tools/bench/timing.py [--model models/reach] [--episodes 600] [--seed 900000]
                                  [--profile fairino|default] [--compute-ms 2]
+                                 [--finger-source ...] [--velocity-source ...] [--episode-start ...]
 
-A ten-episode ROS run says little about a 90 % target: its confidence interval spans 55-100 %.
-This bench reproduces, physics step by physics step, what the real-time loop of
-``sim_policy.launch driver:=<profile>`` does, with the deployed code and none of the noise of
-a ROS run, so 600 episodes take about 30 s:
+A twenty-episode ROS run says little about a 90 % target: its confidence interval spans about
+70-97 %. This bench reproduces, physics step by physics step, what
+``sim_policy.launch driver:=<profile>`` runs in real time, with the deployed code and none of
+the noise of a ROS run, so hundreds of episodes take a minute:
 
-- the simulator's profile (config/sim_node.yaml, + config/sim_node_fairino.yaml for fairino):
-  physics step, joint-state publish rate (each message samples the arm when published), the
-  servo cycle and its delay (src/fr5_rl/sim/servo.py, the simulator's own class);
-- the policy node's step (deploy/deployment.py ``DeploymentStep``, its JointStateReader) at
-  50 Hz with a random phase against the joint states, each command acting ``--compute-ms``
-  after the period starts (``ros_loop.py`` measures the node's compute latency: p50 0.5 ms
-  on a quiet machine, 1.7 ms with one core busy);
-- the episode judged every control period from the first command, as the simulator does.
+- **arm driver** (config/sim_node.yaml, + config/sim_node_fairino.yaml for fairino): the physics
+  step, joint states at ``publish_rate`` (each sampling the arm when published; velocities or
+  0.0 as ``publish_velocities`` says; finger joints only if ``publish_finger_joints``), the servo
+  cycle and its delay (``fr5_rl.sim.servo.ServoCycle``, the simulator's class);
+- **gripper** (``gripper_interface: xmlrpc``): the gripper bridge (``fr5_rl.drivers.gripper_bridge``,
+  config/gripper_bridge.yaml: 10 Hz commands with a 2 % deadband, 10 Hz read-back in whole
+  percent, the transient 0 debounced) calling the simulator's controller emulation
+  (``fr5_rl.sim.controller_emulator``) in-process on the bench's clock; its read-back is the
+  finger joint states the policy observes, as gripper_bridge_node publishes them;
+- **policy node** (``fr5_rl.deploy``): its ``JointStateReader`` (velocities estimated from
+  positions behind a driver that sends none: ``joint_velocity_source: positions``, as
+  real_policy.launch sets it), its ``DeploymentStep`` with the motion guard, at 50 Hz with a random
+  phase against the joint states, each command acting ``--compute-ms`` after the period starts
+  (``ros_loop.py`` measures the node's compute: p50 0.5 ms quiet, 1.7 ms with a core busy);
+- **episodes**: with ``episode_start: go_to_start`` the arm is not teleported: the cup is placed,
+  the guard's start move brings the arm from where the last episode left it, and the episode is
+  judged every control period from the policy's first command, as the simulator does.
 
-Every episode draws its own phases, so the results cover the timings a real run meets. Writes
-bench/results/timing_<task>_<profile>.json. Target (issue #11): >= 90 % reach behind the
-FAIRINO profile.
+``--finger-source``, ``--velocity-source`` and ``--episode-start`` override one part of the
+profile, to see what each costs. Every episode draws its own phases. Writes
+bench/results/timing_<task>_<profile>.json; ``rehearsal.py`` runs the same seeds through ROS.
+Target (issue #27): >= 90 % reach behind the FAIRINO profile.
 """
 import argparse
 import sys
+import xmlrpc.client
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from benchlib import AT_LEAST, REPO, RESULTS_DIR, relative_path, update_summary, verdict, write_result
 
-from fr5_rl.config import load_robot_spec, load_yaml, package_root, whole_multiple
+from fr5_rl.config import load_robot_spec, load_yaml, package_root, typed, whole_multiple
+from fr5_rl.deploy.deployment import Command, DeploymentStep, StepInputs
+from fr5_rl.deploy.joint_state import JointStateReader, Reading, velocities_from_positions
+from fr5_rl.deploy.motion_guard import MotionGuardSettings
+from fr5_rl.deploy.policy import load_policy
+from fr5_rl.drivers.fr5_xmlrpc import Call, ControllerRefused, error_code_of
+from fr5_rl.drivers.gripper_bridge import GripperBridge, GripperBridgeParams, GripperReading
 from fr5_rl.env_config import load_env_config
 from fr5_rl.envs import FR5Env
-from fr5_rl.deploy.deployment import Command, DeploymentStep, StepInputs
-from fr5_rl.deploy.joint_state import JointStateReader, Reading
-from fr5_rl.deploy.policy import load_policy
+from fr5_rl.sim.controller_emulator import ControllerEmulator, ControllerEmulatorSettings
 from fr5_rl.sim.servo import ServoCycle
 from fr5_rl.training.evaluation import wilson_interval
 
@@ -50,47 +67,200 @@ def simulator_profile(profile: str) -> Dict[str, Any]:
     return params
 
 
-def run_episode(env: FR5Env, step: DeploymentStep, robot, seed: int, rng: np.random.Generator,
-                params: Dict[str, Any], compute_s: float) -> Dict[str, Any]:
-    """One episode of the real-time loop; its outcome and length in periods."""
-    physics_dt = float(params["physics_dt"])
-    per_period = whole_multiple(env.control_dt, physics_dt)
-    per_publish = whole_multiple(1.0 / float(params["publish_rate"]), physics_dt)
-    servo_rate = float(params["servo_rate"])
-    servo = ServoCycle(whole_multiple(1.0 / servo_rate, physics_dt) if servo_rate else 0,
-                       int(params["servo_delay_cycles"]), env.joint_positions())
-    compute_steps = int(round(compute_s / physics_dt))
-    env.reset(seed=seed)
-    step.start_episode()
-    reader = JointStateReader(robot.joint_names, robot.finger_joint_names)
-    # Random phases: when the simulator publishes, and when the node's 50 Hz timer fires.
-    publish_phase, policy_phase = int(rng.integers(per_publish)), int(rng.integers(per_period))
-    arm_command: Optional[Sequence[float]] = None
-    gripper_width = robot.max_opening_width
-    pending: List[tuple] = []  # (physics step it arrives at, arm targets, gripper width)
-    first_command_step: Optional[int] = None
-    k = 0
-    while True:
-        now = k * physics_dt
-        if (k + publish_phase) % per_publish == 0:
-            js = env.joint_states()
-            reader.update(js.names, js.positions, js.velocities, now, now)
-        if (k + policy_phase) % per_period == 0:
-            pose = env.object_pose()
-            result = step(StepInputs(now, reader.reading(), Reading(tuple(pose.position), now, stamp=now), now))
-            if isinstance(result, Command):
-                pending.append((k + compute_steps, result.arm_positions, result.gripper_width))
-        while pending and pending[0][0] <= k:
-            _, arm_command, gripper_width = pending.pop(0)
-            if first_command_step is None:
-                first_command_step = k
-        env.advance_physics(servo.targets_for_step(arm_command), gripper_width)
-        k += 1
-        if first_command_step is not None and (k - first_command_step) % per_period == 0:
-            verdict_now = env.judge_period()
-            if verdict_now.ended:
-                return {"seed": seed, "success": bool(verdict_now.success), "failure": verdict_now.failure,
-                        "steps": (k - first_command_step) // per_period}
+@dataclass(frozen=True)
+class Chain:
+    """What stands between the policy and the arm.
+
+    :param finger_source: ``driver`` (the arm's joint states carry the fingers) or ``bridge``
+        (the gripper bridge's read-back of the emulated controller).
+    :param velocity_source: ``driver`` (the messages' velocities) or ``positions`` (estimated).
+    :param episode_start: ``reset`` (teleported to a start drawn around home) or ``go_to_start``.
+    :param publish_velocities: the driver fills velocities (else 0.0).
+    """
+
+    finger_source: str
+    velocity_source: str
+    episode_start: str
+    publish_velocities: bool
+
+    @classmethod
+    def of(cls, params: Dict[str, Any], args: argparse.Namespace) -> "Chain":
+        bridge = params.get("gripper_interface", "topic") == "xmlrpc"
+        driver_velocities = bool(params.get("publish_velocities", True))
+        return cls(finger_source=args.finger_source or ("bridge" if bridge else "driver"),
+                   velocity_source=args.velocity_source or ("driver" if driver_velocities else "positions"),
+                   episode_start=args.episode_start or params.get("episode_start", "reset"),
+                   publish_velocities=driver_velocities)
+
+
+class BenchClock:
+    """The bench's time (s): the bridge, the emulator and the readings share it."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+class InProcessController:
+    """The bridge's controller client, answered by the emulator in-process (same replies as XML-RPC)."""
+
+    def __init__(self, emulator: ControllerEmulator) -> None:
+        self.emulator = emulator
+
+    def call(self, call: Call) -> Tuple[Any, ...]:
+        try:
+            reply = self.emulator.serve_call(call.method, call.args)
+        except xmlrpc.client.Fault as fault:
+            raise ControllerRefused(f"{call} raised XML-RPC fault {fault.faultCode}: {fault.faultString}") from None
+        code, values = error_code_of(reply)
+        if code != 0:
+            raise ControllerRefused(f"{call} returned error code {code}", code)
+        return values
+
+
+class ChainEmulation:
+    """The simulator, the drivers and the policy node of one chain, on one clock."""
+
+    def __init__(self, env: FR5Env, step: DeploymentStep, chain: Chain, params: Dict[str, Any],
+                 compute_s: float, rng: np.random.Generator, trained_velocity_source: str) -> None:
+        self.env, self.step, self.chain, self.rng = env, step, chain, rng
+        self.robot = env.robot_spec
+        self.physics_dt = float(params["physics_dt"])
+        self.per_period = whole_multiple(env.control_dt, self.physics_dt)
+        self.per_publish = whole_multiple(1.0 / float(params["publish_rate"]), self.physics_dt)
+        servo_rate = float(params["servo_rate"])
+        self.servo = ServoCycle(whole_multiple(1.0 / servo_rate, self.physics_dt) if servo_rate else 0,
+                                int(params["servo_delay_cycles"]), env.joint_positions())
+        self.compute_steps = int(round(compute_s / self.physics_dt))
+        self.pause_steps = int(round(float(params["pause_between_episodes"]) / self.physics_dt))
+        node = load_yaml(package_root() / "config" / "policy_node.yaml")
+        guard = typed(MotionGuardSettings, node["guard"], "config/policy_node.yaml guard")
+        estimate = velocities_from_positions("positions" if chain.velocity_source == "positions" else "driver",
+                                             trained_velocity_source)
+        self.reader = JointStateReader(self.robot.joint_names, self.robot.finger_joint_names,
+                                       velocities_from_positions=estimate,
+                                       max_joint_speeds=self.robot.velocity_limits * guard.glitch_speed_factor)
+        self.clock = BenchClock()
+        self.fault: Optional[str] = None
+        self.emulator: Optional[ControllerEmulator] = None
+        self.bridge: Optional[GripperBridge] = None
+        if chain.finger_source == "bridge":
+            self._start_bridge(params)
+        self.previous_end: Optional[List[float]] = None
+
+    def _start_bridge(self, params: Dict[str, Any]) -> None:
+        settings = typed(ControllerEmulatorSettings, params["controller_emulator"], "sim_node controller_emulator")
+        self.emulator = ControllerEmulator(settings, 0, self.clock)  # never started: no socket
+        bridge_params = typed(GripperBridgeParams, load_yaml(package_root() / "config" / "gripper_bridge.yaml"),
+                              "config/gripper_bridge.yaml")
+        finger_names = list(self.robot.finger_joint_names)
+
+        def on_reading(reading: GripperReading) -> None:  # gripper_bridge_node.publish_fingers
+            half = 0.5 * reading.width
+            self.reader.update(finger_names, [half] * len(finger_names), [], self.clock.now, self.clock.now)
+
+        def on_fault(fault: bool) -> None:
+            self.fault = "the gripper bridge reports a fault" if fault else None
+
+        self.bridge = GripperBridge(bridge_params, self.robot.max_opening_width, report=lambda level, text: None,
+                                    client=InProcessController(self.emulator), clock=self.clock,
+                                    on_reading=on_reading, on_fault=on_fault)
+        self.emulator.set_measured_width(self.robot.max_opening_width, moving=False)
+        # Reset, activation and their settle times, before the first episode (the launch's start-up).
+        self.bridge.submit(self.robot.max_opening_width)
+        for _ in range(int(10.0 / self.physics_dt)):
+            self.clock.now += self.physics_dt
+            self._poll_bridge()
+            if self.bridge.status().activated and self.bridge.status().measured_width is not None:
+                break
+
+    def _poll_bridge(self) -> None:
+        for _ in range(10):
+            if self.bridge.poll() is None:
+                return
+
+    def _publish_joint_states(self) -> None:
+        states = self.env.joint_states()
+        arm = len(self.robot.joint_names)
+        count = len(states.names) if self.chain.finger_source == "driver" else arm
+        velocities = states.velocities[:count] if self.chain.publish_velocities else [0.0] * count
+        self.reader.update(states.names[:count], states.positions[:count], velocities, self.clock.now, self.clock.now)
+
+    def _follow_controller(self) -> float:
+        """sim_node._follow_controller: the fingers take the emulated controller's width."""
+        states = self.env.joint_states()
+        arm = len(self.robot.joint_names)
+        self.emulator.set_measured_width(sum(states.positions[arm:]),
+                                         moving=any(abs(speed) > 1e-3 for speed in states.velocities[arm:]))
+        width = self.emulator.commanded_width()
+        return self.robot.max_opening_width if width is None else float(np.clip(width, 0.0, self.robot.max_opening_width))
+
+    def run_episode(self, seed: int) -> Dict[str, Any]:
+        """One episode as the real-time simulator runs it; its outcome and length in periods."""
+        env, step = self.env, self.step
+        if self.chain.episode_start == "go_to_start" and self.previous_end is not None:
+            env.reset(seed=seed, options={"arm_positions": self.previous_end})
+        else:
+            env.reset(seed=seed)
+        self.servo.reset(env.joint_positions())
+        step.start_episode()
+        positioning = self.chain.episode_start == "go_to_start"
+        publish_phase, policy_phase = int(self.rng.integers(self.per_publish)), int(self.rng.integers(self.per_period))
+        arm_command: Optional[Sequence[float]] = None
+        gripper_width = self.robot.max_opening_width
+        pending: List[tuple] = []  # (physics step it arrives at, arm targets, gripper width, from the policy)
+        first_command_step: Optional[int] = None
+        start_move_s = 0.0
+        k = 0
+        while True:
+            self.clock.now += self.physics_dt
+            if (k + publish_phase) % self.per_publish == 0:
+                self._publish_joint_states()
+            if self.bridge is not None:
+                self._poll_bridge()
+                gripper_width = self._follow_controller()
+            if (k + policy_phase) % self.per_period == 0:
+                pose = self.env.object_pose()
+                now = self.clock.now
+                result = step(StepInputs(now, self.reader.reading(), Reading(tuple(pose.position), now, stamp=now),
+                                         now, self.fault))
+                if isinstance(result, Command):
+                    pending.append((k + self.compute_steps, result.arm_positions, result.gripper_width,
+                                    result.target_in_base is not None))
+            while pending and pending[0][0] <= k:
+                _, arm_command, width, from_policy = pending.pop(0)
+                if self.bridge is not None:
+                    self.bridge.submit(width)
+                else:
+                    gripper_width = width
+                if positioning and from_policy:
+                    positioning, start_move_s = False, k * self.physics_dt
+                if first_command_step is None and not positioning:
+                    first_command_step = k
+            env.advance_physics(self.servo.targets_for_step(arm_command), gripper_width)
+            k += 1
+            if first_command_step is not None and (k - first_command_step) % self.per_period == 0:
+                verdict_now = env.judge_period()
+                if verdict_now.ended:
+                    self._pause(arm_command)
+                    self.previous_end = env.joint_positions().tolist()
+                    return {"seed": seed, "success": bool(verdict_now.success), "failure": verdict_now.failure,
+                            "steps": (k - first_command_step) // self.per_period, "start_move_s": round(start_move_s, 3)}
+            if k * self.physics_dt > 120.0:
+                raise RuntimeError(f"seed {seed}: no verdict after 120 s of simulated time (start move stuck?)")
+
+    def _pause(self, arm_command: Optional[Sequence[float]]) -> None:
+        """The simulator's pause between episodes: the arm holds where it ended, the fingers as commanded."""
+        hold = tuple(self.env.joint_positions())
+        for _ in range(self.pause_steps):
+            self.clock.now += self.physics_dt
+            width = self.robot.max_opening_width
+            if self.bridge is not None:
+                self._poll_bridge()
+                width = self._follow_controller()
+            self.env.advance_physics(hold, width)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -101,24 +271,37 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--profile", choices=("fairino", "default"), default="fairino")
     parser.add_argument("--backend", choices=("onnx", "torch"), default="onnx")
     parser.add_argument("--compute-ms", type=float, default=2.0, help="period start to command sent (ms)")
+    parser.add_argument("--finger-source", choices=("driver", "bridge"), default=None,
+                        help="override the profile: fingers in the driver's joint states, or the bridge's read-back")
+    parser.add_argument("--velocity-source", choices=("driver", "positions"), default=None,
+                        help="override the profile: the driver's velocities, or estimated from positions")
+    parser.add_argument("--episode-start", choices=("reset", "go_to_start"), default=None,
+                        help="override the profile: teleport to a start around home, or the guard's start move")
     parser.add_argument("--results", type=Path, default=RESULTS_DIR)
+    parser.add_argument("--name", default=None, help="result file stem (default timing_<task>_<profile>)")
     args = parser.parse_args(argv)
 
     model_dir = Path(args.model) if Path(args.model).is_absolute() else REPO / args.model
     policy = load_policy(model_dir, args.backend)
     robot = load_robot_spec()
     params = simulator_profile(args.profile)
+    chain = Chain.of(params, args)
+    if chain.velocity_source == "driver" and not chain.publish_velocities:
+        parser.error("--velocity-source driver: this profile's driver publishes velocities of 0.0")
     task = policy.task
     env = FR5Env(task, config={task: {"simulation": {"physics_dt": float(params["physics_dt"]),
                                                      "solver_iterations": int(params["solver_iterations"])}}})
     node_cfg = load_yaml(package_root() / "config" / "policy_node.yaml")
-    step = DeploymentStep(policy, robot, load_env_config(policy.meta.get("env_overrides", {})),
+    guard = typed(MotionGuardSettings, {**node_cfg["guard"], "go_to_start": True}, "config/policy_node.yaml guard")
+    trained = load_env_config(policy.meta.get("env_overrides", {}))
+    step = DeploymentStep(policy, robot, trained,
                           float(node_cfg["joint_state_timeout"]), float(node_cfg["target_timeout"]),
                           target_workspace_margin=float(node_cfg["target_workspace_margin"]),
-                          future_stamp_tolerance=float(node_cfg["future_stamp_tolerance"]))
-    rng = np.random.default_rng(args.seed)
-    records = [run_episode(env, step, robot, args.seed + index, rng, params, args.compute_ms / 1000.0)
-               for index in range(args.episodes)]
+                          future_stamp_tolerance=float(node_cfg["future_stamp_tolerance"]),
+                          guard=guard if chain.episode_start == "go_to_start" else None)
+    emulation = ChainEmulation(env, step, chain, params, args.compute_ms / 1000.0, np.random.default_rng(args.seed),
+                                trained.observation.joint_velocity_source)
+    records = [emulation.run_episode(args.seed + index) for index in range(args.episodes)]
     env.close()
     successes = sum(record["success"] for record in records)
     failures: Dict[str, int] = {}
@@ -127,15 +310,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             failures[str(record["failure"])] = failures.get(str(record["failure"]), 0) + 1
     rate = successes / len(records)
     low, high = wilson_interval(successes, len(records))
-    print(f"{relative_path(model_dir)} behind the {args.profile} profile: {successes}/{len(records)} "
+    print(f"{relative_path(model_dir)} behind the {args.profile} profile ({chain}): {successes}/{len(records)} "
           f"({100 * rate:.1f} %, 95 % CI {100 * low:.1f}-{100 * high:.1f} %), failures {failures}")
     verdicts = {"success_rate": verdict(rate, TARGET_SUCCESS, AT_LEAST)}
-    out = args.results / f"timing_{task}_{args.profile}.json"
+    name = args.name or f"timing_{task}_{args.profile}"
+    out = args.results / f"{name}.json"
     write_result(out, {"model": relative_path(model_dir), "profile": args.profile, "simulator": params,
-                       "compute_ms": args.compute_ms, "episodes": len(records), "seed": args.seed,
-                       "successes": successes, "success_rate": rate, "success_ci95": [low, high],
+                       "chain": chain.__dict__, "compute_ms": args.compute_ms, "episodes": len(records),
+                       "seed": args.seed, "successes": successes, "success_rate": rate, "success_ci95": [low, high],
                        "failures": failures, "records": records}, verdicts)
-    update_summary(args.results, f"timing_{task}_{args.profile}", out)
+    update_summary(args.results, name, out)
     return 0
 
 

@@ -42,6 +42,19 @@ class ArmJointState:
     gripper_width: Optional[float]
 
 
+def velocities_from_positions(driver_source: str, trained_source: str) -> bool:
+    """Whether the node estimates joint velocities from positions rather than take the driver's.
+
+    :param driver_source: what the driver sends (the node's ``~joint_velocity_source``): ``driver``
+        (true velocities) or ``positions`` (none, or all 0.0, as the FAIRINO driver).
+    :param trained_source: what the policy observed in training (``observation.joint_velocity_source``
+        of its meta.json): ``measured`` or ``positions``.
+    :return: True when either says so: a policy trained on estimated velocities gets the same
+        estimate behind a driver that sends true ones, since the two differ by the estimate's lag.
+    """
+    return driver_source == "positions" or trained_source == "positions"
+
+
 class JointStateReader:
     """Merges joint-state messages *by name* into the newest :class:`ArmJointState`.
 

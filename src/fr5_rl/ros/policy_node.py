@@ -44,7 +44,7 @@ from ..config import ConfigError, check_positive, load_robot_spec, package_root
 from ..env_config import load_env_config
 from ..deploy.bundle import ModelFilesError
 from ..deploy.deployment import Command, DeploymentStep, Hold, HoldReason, StepInputs
-from ..deploy.joint_state import JointStateReader, Reading
+from ..deploy.joint_state import JointStateReader, Reading, velocities_from_positions
 from ..deploy.motion_guard import MotionGuardSettings, StartPhase
 from ..deploy.policy import load_policy
 from .params import exit_if_help_asked, node_parameters
@@ -117,7 +117,8 @@ class PolicyNode:
                               "the action scaling would be wrong; set ~rate to the training rate")
         self.step.enabled = params.enabled
         self.reader = JointStateReader(robot.joint_names, robot.finger_joint_names,
-                                       velocities_from_positions=params.joint_velocity_source == "positions",
+                                       velocities_from_positions=velocities_from_positions(
+                                           params.joint_velocity_source, env_cfg.observation.joint_velocity_source),
                                        max_joint_speeds=(robot.velocity_limits * params.guard.glitch_speed_factor
                                                          if params.motion_guard else None))
         self.gripper_fault: Optional[str] = None
