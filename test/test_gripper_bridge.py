@@ -29,7 +29,8 @@ from fr5_rl.drivers.fr5_xmlrpc import (
     Call, ControllerClient, ControllerRefused,
 )
 from fr5_rl.drivers.gripper_bridge import GripperBridge, GripperBridgeParams
-from fr5_rl.drivers.gripper_decisions import Backoff, ThrottledReport, binary_state, needs_move, width_to_percent
+from fr5_rl.drivers.gripper_decisions import Backoff, ThrottledReport, binary_state
+from fr5_rl.gripper import needs_move, width_to_percent
 
 MAX_WIDTH = load_robot_spec().max_opening_width  # 0.08 m
 

@@ -63,7 +63,7 @@ ALLOWED = {
     "tasks": {"shared", "tasks"},
     "shared": {"shared"},
 }
-SHARED = {"config", "env_config", "kinematics", "observation", "control", "transforms", "fr5_rl"}
+SHARED = {"config", "env_config", "kinematics", "observation", "control", "transforms", "gripper", "fr5_rl"}
 
 
 def kind(module: str) -> str:

@@ -191,8 +191,11 @@ class RandomisationConfig:
     observation_age_s: List[float]
     timing_share: float
     plain_episode_share: float
+    gripper_bridge_share: float
 
     def check(self, source: str) -> None:
+        if not 0.0 <= self.gripper_bridge_share <= 1.0:
+            raise ConfigError(f"randomisation.gripper_bridge_share: {self.gripper_bridge_share} must be in [0, 1]")
         if not 0.0 <= self.plain_episode_share < 1.0:
             raise ConfigError(f"randomisation.plain_episode_share: {self.plain_episode_share} must be in [0, 1)")
         if not 0.0 <= self.timing_share <= 1.0:

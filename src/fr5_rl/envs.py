@@ -24,6 +24,7 @@ from gymnasium import spaces
 from .config import load_robot_spec
 from .env_config import EnvConfig, load_env_config
 from .control import ACTION_SIZE, JointCommandShaper, finite_values
+from .gripper import BridgedGripper, load_bridge_timing
 from .kinematics import ForwardKinematics
 from .observation import ActionHistory, ObservationBuilder, velocity_from_positions
 from .sim.robot import FR5Robot
@@ -190,6 +191,11 @@ class FR5Env(gym.Env):
         self._velocities_from_positions = self.cfg.observation.joint_velocity_source == "positions"
         self._velocity_sample: Optional[Tuple[Sequence[float], float, List[float]]] = None
         self._workspace = (tuple(self.cfg.workspace.low), tuple(self.cfg.workspace.high))
+        # randomisation.gripper_bridge_share: the gripper behind the bridge in this episode, or None.
+        self._bridge_model = (BridgedGripper(load_bridge_timing(), self.robot_spec.max_opening_width)
+                              if self.cfg.randomisation.enabled and self.cfg.randomisation.gripper_bridge_share > 0.0
+                              else None)
+        self._bridge: Optional[BridgedGripper] = None
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None
@@ -239,6 +245,8 @@ class FR5Env(gym.Env):
         # floats (the observation refuses anything else), so the shaper's checks are not repeated.
         targets = self.shaper.targets_from_floats(applied, self._observed_joint_positions)
         width = sent_width if applied is values else self.shaper.gripper_width(applied)
+        if self._bridge is not None:
+            width = self._bridge.command(width, self._steps * self.control_dt)
         early = self._run_period(targets, width)
         measured_early, age = early if early is not None else (None, 0.0)
         state, obs = self._observe(measured_early, (self._steps + 1) * self.control_dt - age)
@@ -471,6 +479,8 @@ class FR5Env(gym.Env):
             q, velocities, width, tcp_position, tcp_quaternion = measured_early
             tcp_axis = quaternion_z_axis(tcp_quaternion)
         self._observed_joint_positions = q
+        if self._bridge is not None:
+            width = self._bridge.observe(width, sample_time)
         if self._obs_noise_std > 0.0:
             rng = self.np_random
             q = np.asarray(q) + rng.normal(0.0, self._obs_noise_std, 6)
@@ -542,3 +552,9 @@ class FR5Env(gym.Env):
         self._command_delay_range = tuple(rnd.command_delay_s) if timing else (0.0, 0.0)
         self._observation_age_range = tuple(rnd.observation_age_s) if timing else (0.0, 0.0)
         self._period_timing = self._command_delay_range[1] > 0.0 or self._observation_age_range[1] > 0.0
+        self._bridge = None
+        if on and self._bridge_model is not None and rng.uniform() < rnd.gripper_bridge_share:
+            timing = self._bridge_model.timing
+            self._bridge = self._bridge_model
+            self._bridge.reset(self.robot_spec.max_opening_width, float(rng.uniform(0.0, timing.call_period)),
+                               float(rng.uniform(0.0, timing.read_period)))

@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 from typing import Any, Dict, List, Optional
 
-from benchlib import RESULTS_DIR, machine_info, update_summary, write_result
+from benchlib import REPO, RESULTS_DIR, machine_info, update_summary, write_result
 from fr5_rl.deploy.bundle import read_meta
 from fr5_rl.training.evaluation import wilson_interval
 from roslaunch_run import run_launch
@@ -47,7 +47,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     args = parser.parse_args(argv)
     rows: List[Dict[str, Any]] = []
     for model in args.models:
-        task = read_meta(Path(model))["task"]  # the simulator judges the model's own task
+        # The simulator judges the model's own task; a relative path is the package's (as the launch reads it).
+        task = read_meta(Path(model) if Path(model).is_absolute() else REPO / model)["task"]
         for chain in args.chains:
             arguments = {"rviz": False, "model": model, "task": task, "episodes": args.episodes,
                          "seed": args.seed, **CHAINS[chain]}

@@ -75,7 +75,7 @@ class Chain:
         (the gripper bridge's read-back of the emulated controller).
     :param velocity_source: ``driver`` (the messages' velocities) or ``positions`` (estimated).
     :param episode_start: ``reset`` (teleported to a start drawn around home) or ``go_to_start``.
-    :param publish_velocities: the driver fills velocities (else 0.0).
+    :param publish_velocities: the driver fills velocities (else 0.0, as the FAIRINO driver).
     """
 
     finger_source: str
@@ -86,11 +86,11 @@ class Chain:
     @classmethod
     def of(cls, params: Dict[str, Any], args: argparse.Namespace) -> "Chain":
         bridge = params.get("gripper_interface", "topic") == "xmlrpc"
-        driver_velocities = bool(params.get("publish_velocities", True))
+        velocity_source = args.velocity_source or ("driver" if params.get("publish_velocities", True) else "positions")
         return cls(finger_source=args.finger_source or ("bridge" if bridge else "driver"),
-                   velocity_source=args.velocity_source or ("driver" if driver_velocities else "positions"),
+                   velocity_source=velocity_source,
                    episode_start=args.episode_start or params.get("episode_start", "reset"),
-                   publish_velocities=driver_velocities)
+                   publish_velocities=velocity_source == "driver")
 
 
 class BenchClock:
@@ -274,7 +274,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--finger-source", choices=("driver", "bridge"), default=None,
                         help="override the profile: fingers in the driver's joint states, or the bridge's read-back")
     parser.add_argument("--velocity-source", choices=("driver", "positions"), default=None,
-                        help="override the profile: the driver's velocities, or estimated from positions")
+                        help="override the profile: the driver sends true velocities, or 0.0 (estimated from positions)")
     parser.add_argument("--episode-start", choices=("reset", "go_to_start"), default=None,
                         help="override the profile: teleport to a start around home, or the guard's start move")
     parser.add_argument("--results", type=Path, default=RESULTS_DIR)
@@ -286,8 +286,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     robot = load_robot_spec()
     params = simulator_profile(args.profile)
     chain = Chain.of(params, args)
-    if chain.velocity_source == "driver" and not chain.publish_velocities:
-        parser.error("--velocity-source driver: this profile's driver publishes velocities of 0.0")
     task = policy.task
     env = FR5Env(task, config={task: {"simulation": {"physics_dt": float(params["physics_dt"]),
                                                      "solver_iterations": int(params["solver_iterations"])}}})

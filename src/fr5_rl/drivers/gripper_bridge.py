@@ -35,15 +35,13 @@ from typing import Any, Callable, List, Optional, Tuple, Union
 from urllib.parse import urlparse
 
 from ..config import ConfigError
+from ..gripper import needs_move, percent_to_width, width_to_percent
 from .fr5_xmlrpc import (
     GRIPPER_ACTIVATE, GRIPPER_RESET, NON_BLOCKING, PANEL_CLOSE, PANEL_OPEN, Call, Controller, ControllerClient,
     ControllerRefused, ControllerUnreachable, act_gripper, cur_position_of, get_gripper_cur_position,
     get_gripper_motion_done, motion_done_fault, move_gripper, move_gripper_10,
 )
-from .gripper_decisions import (
-    CLOSED, OPEN, Backoff, Report, ThrottledReport, binary_state, needs_move, percent_to_width, transient_zero,
-    width_to_percent,
-)
+from .gripper_decisions import CLOSED, OPEN, Backoff, Report, ThrottledReport, binary_state, transient_zero
 
 MODES = ("position", "binary")
 #: ``MoveGripper`` argument counts: the 6-argument SDK form, or the newer 10-argument one.

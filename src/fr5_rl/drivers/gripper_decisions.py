@@ -1,7 +1,8 @@
 """The gripper bridge's pure decisions and small helpers: no network, no threads of its own.
 
-Percent ↔ width, the deadband, binary mode's hysteresis, the read-back's debounce, the retry
-backoff and the throttled error log. :mod:`fr5_rl.drivers.gripper_bridge` puts them to work.
+Binary mode's hysteresis, the read-back's debounce, the retry
+backoff and the throttled error log. :mod:`fr5_rl.drivers.gripper_bridge` puts them to work;
+percent ↔ width and the deadband are :mod:`fr5_rl.gripper`'s, shared with the environment.
 """
 from __future__ import annotations
 
@@ -12,33 +13,6 @@ from typing import Callable, Dict, Optional
 OPEN, CLOSED = "open", "closed"
 
 Report = Callable[[str, str], None]  # (level: "error" | "warn" | "info", message)
-
-
-
-
-def width_to_percent(width: float, max_width: float, invert: bool = False) -> int:
-    """The ``MoveGripper`` position for an opening width.
-
-    :param width: opening width (m), already inside 0 … ``max_width``.
-    :param max_width: the gripper's largest opening (m), = 100 %.
-    :param invert: True when the controller counts 0 % as open.
-    :return: whole percent 0 … 100 (the SDK takes integers).
-    """
-    percent = min(100, max(0, int(round(100.0 * width / max_width))))
-    return 100 - percent if invert else percent
-
-
-def percent_to_width(percent: float, max_width: float, invert: bool = False) -> float:
-    """The opening width a ``GetGripperCurPosition`` percentage stands for (the inverse of
-    :func:`width_to_percent`).
-
-    :param percent: the controller's position, 0 … 100 (clamped into that range).
-    :param max_width: the gripper's largest opening (m), = 100 %.
-    :param invert: True when the controller counts 0 % as open.
-    :return: opening width (m).
-    """
-    percent = min(100.0, max(0.0, float(percent)))
-    return max_width * ((100.0 - percent) if invert else percent) / 100.0
 
 
 def transient_zero(raw_percent: float, now: float, last_move_at: Optional[float], window: float) -> bool:
@@ -53,23 +27,6 @@ def transient_zero(raw_percent: float, now: float, last_move_at: Optional[float]
     :param window: how long after a move a 0 is distrusted (s).
     """
     return raw_percent <= 0.0 and last_move_at is not None and now - last_move_at < window
-
-
-def needs_move(target: int, sent: Optional[int], deadband: int) -> bool:
-    """Whether a new ``MoveGripper`` is worth sending.
-
-    The end stops are always reached exactly: a deadband must not leave the gripper 1 % short
-    of fully closed around an object.
-
-    :param target: percent wanted now.
-    :param sent: percent last acknowledged by the controller (None: unknown, e.g. after a reconnect).
-    :param deadband: smallest change (percent) that is sent.
-    """
-    if sent is None:
-        return True
-    if target == sent:
-        return False
-    return abs(target - sent) >= deadband or target in (0, 100)
 
 
 def binary_state(width: float, current: Optional[str], threshold: float, hysteresis: float) -> str:

@@ -1,0 +1,129 @@
+"""The gripper as the FR5 controller serves it: percent <-> width, the command deadband, and the
+opening as a policy sees it through the gripper bridge.
+
+The bridge (:mod:`fr5_rl.drivers.gripper_bridge`) and the environment's randomisation
+(``randomisation.gripper_bridge_share``) both use these functions, so that the gripper a policy
+meets in training is the one the bridge gives it on the real cell. No ROS, no PyBullet.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+from .config import ConfigError, load_yaml
+
+def width_to_percent(width: float, max_width: float, invert: bool = False) -> int:
+    """The ``MoveGripper`` position for an opening width.
+
+    :param width: opening width (m), already inside 0 … ``max_width``.
+    :param max_width: the gripper's largest opening (m), = 100 %.
+    :param invert: True when the controller counts 0 % as open.
+    :return: whole percent 0 … 100 (the SDK takes integers).
+    """
+    percent = min(100, max(0, int(round(100.0 * width / max_width))))
+    return 100 - percent if invert else percent
+
+
+def percent_to_width(percent: float, max_width: float, invert: bool = False) -> float:
+    """The opening width a ``GetGripperCurPosition`` percentage stands for (the inverse of
+    :func:`width_to_percent`).
+
+    :param percent: the controller's position, 0 … 100 (clamped into that range).
+    :param max_width: the gripper's largest opening (m), = 100 %.
+    :param invert: True when the controller counts 0 % as open.
+    :return: opening width (m).
+    """
+    percent = min(100.0, max(0.0, float(percent)))
+    return max_width * ((100.0 - percent) if invert else percent) / 100.0
+
+
+def needs_move(target: int, sent: Optional[int], deadband: int) -> bool:
+    """Whether a new ``MoveGripper`` is worth sending.
+
+    The end stops are always reached exactly: a deadband must not leave the gripper 1 % short
+    of fully closed around an object.
+
+    :param target: percent wanted now.
+    :param sent: percent last acknowledged by the controller (None: unknown, e.g. after a reconnect).
+    :param deadband: smallest change (percent) that is sent.
+    """
+    if sent is None:
+        return True
+    if target == sent:
+        return False
+    return abs(target - sent) >= deadband or target in (0, 100)
+
+
+@dataclass(frozen=True)
+class BridgeTiming:
+    """What the gripper bridge does to the gripper, from config/gripper_bridge.yaml.
+
+    :param call_period: s between two ``MoveGripper`` calls at most (1 / ``max_call_rate``).
+    :param read_period: s between two ``GetGripperCurPosition`` read-backs (1 / ``readback_rate``).
+    :param deadband_percent: smallest change (%) sent as a new ``MoveGripper``.
+    """
+
+    call_period: float
+    read_period: float
+    deadband_percent: int
+
+
+class BridgedGripper:
+    """The gripper behind the bridge, for a simulation that steps in control periods.
+
+    Commands: a new width goes out as whole percent, only when it moved past the deadband (the
+    end stops always), and at most once per ``call_period``; the fingers carry out the last one
+    sent. Observation: the opening read back every ``read_period`` in whole percent, held in
+    between. Both clocks start at a random phase (:meth:`reset`).
+
+    :param timing: the bridge's rates and deadband.
+    :param max_width: the gripper's largest opening (m), = 100 %.
+    """
+
+    def __init__(self, timing: BridgeTiming, max_width: float) -> None:
+        self.timing, self.max_width = timing, max_width
+        self.sent: Optional[int] = None
+        self.next_call = self.next_read = 0.0
+        self.read_width = max_width
+
+    def reset(self, width: float, call_phase: float, read_phase: float) -> None:
+        """A new episode with the fingers at ``width`` (m), sent and read back.
+
+        :param call_phase: s until the first call may go out (0 … call_period).
+        :param read_phase: s until the first read-back (0 … read_period).
+        """
+        self.sent = width_to_percent(width, self.max_width)
+        self.read_width = percent_to_width(self.sent, self.max_width)
+        self.next_call, self.next_read = call_phase, read_phase
+
+    def command(self, width: float, now: float) -> float:
+        """The width (m) the fingers are told to take at ``now`` (s) when ``width`` is wanted."""
+        wanted = width_to_percent(min(self.max_width, max(0.0, width)), self.max_width)
+        if now >= self.next_call and needs_move(wanted, self.sent, self.timing.deadband_percent):
+            self.sent = wanted
+            self.next_call = now + self.timing.call_period
+        return percent_to_width(self.sent, self.max_width)
+
+    def observe(self, measured_width: float, now: float) -> float:
+        """The opening (m) the policy sees at ``now`` (s): the newest read-back of the fingers."""
+        if now >= self.next_read:
+            self.read_width = percent_to_width(width_to_percent(min(self.max_width, max(0.0, measured_width)),
+                                                                self.max_width), self.max_width)
+            while self.next_read <= now:
+                self.next_read += self.timing.read_period
+        return self.read_width
+
+
+def load_bridge_timing(config_name: str = "gripper_bridge") -> BridgeTiming:
+    """:class:`BridgeTiming` from the bridge's parameter file (``max_call_rate``, ``readback_rate``,
+    ``deadband_percent``): the environment models the bridge the node runs.
+
+    :raises ConfigError: a rate that is not positive (a read-back rate of 0, off, leaves a
+        policy that observes the opening without any reading).
+    """
+    params = load_yaml(config_name)
+    call_rate, read_rate = float(params["max_call_rate"]), float(params["readback_rate"])
+    if call_rate <= 0 or read_rate <= 0:
+        raise ConfigError(f"config/{config_name}.yaml: max_call_rate ({call_rate:g}) and readback_rate ({read_rate:g}) "
+                          "must be positive for the environment to model the bridge")
+    return BridgeTiming(1.0 / call_rate, 1.0 / read_rate, int(params["deadband_percent"]))

@@ -1,0 +1,69 @@
+"""tools/bench/timing.py's chain emulation is wired as the rehearsal is: the policy observes the
+fingers only through the gripper bridge's read-back of the emulated controller, the velocities
+it observes are estimated (the driver sends 0.0), and an episode after the first begins with
+the motion guard's start move from where the previous one ended."""
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools" / "bench"))
+
+import timing  # noqa: E402
+from fr5_rl.config import load_robot_spec, load_yaml, package_root, typed  # noqa: E402
+from fr5_rl.deploy.deployment import DeploymentStep  # noqa: E402
+from fr5_rl.deploy.motion_guard import MotionGuardSettings  # noqa: E402
+from fr5_rl.deploy.policy import load_policy  # noqa: E402
+from fr5_rl.env_config import load_env_config  # noqa: E402
+from fr5_rl.envs import FR5Env  # noqa: E402
+
+
+def emulation(profile: str, **overrides):
+    params = timing.simulator_profile(profile)
+    args = argparse.Namespace(finger_source=None, velocity_source=None, episode_start=None, **overrides)
+    chain = timing.Chain.of(params, args)
+    policy = load_policy(package_root() / "models" / "reach", "onnx")
+    env = FR5Env("reach", config={"reach": {"simulation": {"physics_dt": float(params["physics_dt"]),
+                                                           "solver_iterations": int(params["solver_iterations"])}}})
+    node = load_yaml(package_root() / "config" / "policy_node.yaml")
+    guard = typed(MotionGuardSettings, {**node["guard"], "go_to_start": True}, "guard")
+    trained = load_env_config(policy.meta.get("env_overrides", {}))
+    step = DeploymentStep(policy, load_robot_spec(), trained, float(node["joint_state_timeout"]),
+                          float(node["target_timeout"]), guard=guard if chain.episode_start == "go_to_start" else None)
+    return timing.ChainEmulation(env, step, chain, params, 0.002, np.random.default_rng(0),
+                                 trained.observation.joint_velocity_source), env
+
+
+def test_the_fairino_profile_is_the_rehearsals_chain():
+    run, env = emulation("fairino")
+    try:
+        assert run.chain == timing.Chain("bridge", "positions", "go_to_start", publish_velocities=False)
+        assert run.bridge.status().activated  # reset and activation ran before the first episode
+        first = run.run_episode(930_000)
+        # Leave the arm far from the start, as an operator might: the next episode must begin
+        # with the guard's slow move back, not a teleport.
+        run.previous_end = (np.asarray(run.previous_end) + np.array([0.5, 0.0, 0.0, 0.0, 0.0, 0.0])).tolist()
+        second = run.run_episode(930_001)
+        assert first["start_move_s"] < 0.05 < 0.5 / 0.3 <= second["start_move_s"]
+        moves = [args for method, args in run.emulator.requests() if method == "MoveGripper"]
+        assert moves, "the bridge never sent MoveGripper to the emulated controller"
+        assert run.bridge.status().readings > 10  # the read-back the fingers are observed through
+        state = run.reader.reading().value
+        # The fingers as the bridge read them back: whole percent of the stroke.
+        percent = 100.0 * state.gripper_width / load_robot_spec().max_opening_width
+        assert percent == pytest.approx(round(percent), abs=1e-6)
+    finally:
+        env.close()
+
+
+def test_the_default_profile_takes_fingers_and_velocities_from_the_driver():
+    run, env = emulation("default")
+    try:
+        assert run.chain == timing.Chain("driver", "driver", "reset", publish_velocities=True)
+        assert run.bridge is None
+        record = run.run_episode(930_000)
+        assert record["start_move_s"] == 0.0 and record["steps"] > 0
+    finally:
+        env.close()

@@ -1,0 +1,94 @@
+"""fr5_rl.gripper: the gripper as the bridge serves it, shared by the bridge and the environment
+(randomisation.gripper_bridge_share). The model must agree with the bridge itself: the same
+deadband and percent functions, the rates of config/gripper_bridge.yaml."""
+import numpy as np
+import pytest
+
+from fr5_rl.config import ConfigError, load_robot_spec, load_yaml
+from fr5_rl.envs import FR5Env
+from fr5_rl.gripper import BridgedGripper, BridgeTiming, load_bridge_timing, percent_to_width, width_to_percent
+
+MAX_WIDTH = load_robot_spec().max_opening_width
+TIMING = BridgeTiming(call_period=0.1, read_period=0.1, deadband_percent=2)
+
+
+def test_the_timing_comes_from_the_bridges_parameter_file():
+    params = load_yaml("gripper_bridge")
+    timing = load_bridge_timing()
+    assert timing.call_period == pytest.approx(1.0 / params["max_call_rate"])
+    assert timing.read_period == pytest.approx(1.0 / params["readback_rate"])
+    assert timing.deadband_percent == params["deadband_percent"]
+
+
+def test_a_readback_rate_of_zero_is_refused(tmp_path, monkeypatch):
+    import fr5_rl.gripper as gripper
+
+    monkeypatch.setattr(gripper, "load_yaml", lambda name: {"max_call_rate": 10.0, "readback_rate": 0.0,
+                                                             "deadband_percent": 2})
+    with pytest.raises(ConfigError, match="readback_rate"):
+        gripper.load_bridge_timing()
+
+
+def test_commands_go_out_at_the_call_rate_in_whole_percent_past_the_deadband():
+    link = BridgedGripper(TIMING, MAX_WIDTH)
+    link.reset(MAX_WIDTH, call_phase=0.05, read_phase=0.0)
+    assert link.command(0.0, 0.0) == pytest.approx(MAX_WIDTH)  # too early: the open command stands
+    assert link.command(0.0, 0.06) == 0.0  # the first call slot: closed (an end stop is always sent)
+    assert link.command(0.03, 0.08) == 0.0  # next slot only at 0.16 s
+    sent = link.command(0.0301, 0.16)
+    assert sent == pytest.approx(percent_to_width(width_to_percent(0.0301, MAX_WIDTH), MAX_WIDTH))
+    assert 100 * sent / MAX_WIDTH == pytest.approx(round(100 * sent / MAX_WIDTH))
+    # 1 % away: inside the deadband, nothing new is sent however long one waits.
+    assert link.command(sent + 0.01 * MAX_WIDTH, 1.0) == pytest.approx(sent)
+
+
+def test_the_opening_is_read_back_at_the_read_rate_and_held():
+    link = BridgedGripper(TIMING, MAX_WIDTH)
+    link.reset(MAX_WIDTH, call_phase=0.0, read_phase=0.03)
+    assert link.observe(0.05, 0.02) == pytest.approx(MAX_WIDTH)  # no read yet: the last one holds
+    first = link.observe(0.05012, 0.04)
+    assert first == pytest.approx(percent_to_width(width_to_percent(0.05012, MAX_WIDTH), MAX_WIDTH))
+    assert link.observe(0.01, 0.12) == pytest.approx(first)  # next read at 0.13 s
+    assert link.observe(0.01, 0.13) == pytest.approx(0.01, abs=0.0051 * MAX_WIDTH)  # half a percent at most
+    # A long gap (a paused simulation) reads once and keeps the phase.
+    link.observe(0.02, 1.0)
+    assert link.next_read == pytest.approx(1.03)
+
+
+PERTURBED = {"enabled": True, "plain_episode_share": 0.0}
+
+
+def test_the_environment_observes_the_read_back_in_bridge_episodes():
+    env = FR5Env(task="grasp", config={"randomisation": {**PERTURBED, "gripper_bridge_share": 1.0}})
+    try:
+        env.reset(seed=5)
+        close = np.zeros(7)
+        close[6] = -1.0
+        seen, measured = [], []
+        for _ in range(20):
+            obs, *_ = env.step(close)
+            seen.append(env._bridge.read_width)
+            measured.append(sum(env.joint_states().positions[6:]))
+        # Whole percent, changing at most every 5 steps (10 Hz against 50 Hz), lagging the fingers.
+        assert all(100 * w / MAX_WIDTH == pytest.approx(round(100 * w / MAX_WIDTH)) for w in seen)
+        changes = [k for k in range(1, len(seen)) if seen[k] != seen[k - 1]]
+        assert changes and all(b - a >= 5 for a, b in zip(changes, changes[1:]))
+        assert np.mean(np.asarray(seen) - np.asarray(measured)) > 0.002  # closing: the read-back is wider
+    finally:
+        env.close()
+
+
+def test_without_the_share_episodes_are_unchanged():
+    """gripper_bridge_share 0 draws nothing: every other configuration keeps its episodes."""
+    observations = []
+    for config in ({"randomisation": PERTURBED}, {"randomisation": {**PERTURBED, "gripper_bridge_share": 0.0}}):
+        env = FR5Env(task="grasp", config=config)
+        obs, _ = env.reset(seed=11)
+        observations.append(obs)
+        env.close()
+    assert np.array_equal(*observations)
+
+
+def test_a_share_outside_zero_to_one_is_refused():
+    with pytest.raises(ConfigError, match="gripper_bridge_share"):
+        FR5Env(task="grasp", config={"randomisation": {**PERTURBED, "gripper_bridge_share": 1.5}})
