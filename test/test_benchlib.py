@@ -317,3 +317,20 @@ def test_only_the_helper_starts_roslaunch_or_reads_its_printed_outcomes(tmp_path
     own.write_text('import re, subprocess\nsubprocess.Popen(["roslaunch", "-p", "1", "fr5_rl", "x.launch"])\n'
                    're.search(r"success rate: (\\d+)/(\\d+)", "")\nre.findall(r"failure \\(([^)]*)\\)", "")\n')
     assert set(offending_launch_code(own)) == {"roslaunch", "success rate: (\\d+)/(\\d+)", "failure \\(([^)]*)\\)"}
+
+
+# ----------------------------------------------------------------------------- every tool starts
+TOOL_SCRIPTS = sorted([*TOOLS.glob("*.py"), *(TOOLS / "bench").glob("*.py")])
+
+
+@pytest.mark.parametrize("script", [path for path in TOOL_SCRIPTS if "argparse" in path.read_text(encoding="utf-8")],
+                         ids=lambda path: str(path.relative_to(TOOLS)))
+def test_every_tool_with_a_command_line_starts(script):
+    """A moved module breaks a tool's imports, and nothing else runs it before a user does
+    (ship_model.py still imported benchlib from its old place)."""
+    import subprocess
+
+    result = subprocess.run([sys.executable, str(script), "--help"], capture_output=True, text=True, timeout=120,
+                            cwd=str(REPO))
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "usage" in result.stdout.lower()

@@ -9,7 +9,7 @@ from fr5_rl.envs import FR5Env
 from fr5_rl.gripper import BridgedGripper, BridgeTiming, load_bridge_timing, percent_to_width, width_to_percent
 
 MAX_WIDTH = load_robot_spec().max_opening_width
-TIMING = BridgeTiming(call_period=0.1, read_period=0.1, deadband_percent=2)
+TIMING = BridgeTiming(call_period=0.1, read_period=0.1, deadband_percent=2, zero_debounce=0.3)
 
 
 def test_the_timing_comes_from_the_bridges_parameter_file():
@@ -18,13 +18,14 @@ def test_the_timing_comes_from_the_bridges_parameter_file():
     assert timing.call_period == pytest.approx(1.0 / params["max_call_rate"])
     assert timing.read_period == pytest.approx(1.0 / params["readback_rate"])
     assert timing.deadband_percent == params["deadband_percent"]
+    assert timing.zero_debounce == params["zero_debounce"]
 
 
 def test_a_readback_rate_of_zero_is_refused(tmp_path, monkeypatch):
     import fr5_rl.gripper as gripper
 
     monkeypatch.setattr(gripper, "load_yaml", lambda name: {"max_call_rate": 10.0, "readback_rate": 0.0,
-                                                             "deadband_percent": 2})
+                                                             "deadband_percent": 2, "zero_debounce": 0.3})
     with pytest.raises(ConfigError, match="readback_rate"):
         gripper.load_bridge_timing()
 
@@ -40,6 +41,21 @@ def test_commands_go_out_at_the_call_rate_in_whole_percent_past_the_deadband():
     assert 100 * sent / MAX_WIDTH == pytest.approx(round(100 * sent / MAX_WIDTH))
     # 1 % away: inside the deadband, nothing new is sent however long one waits.
     assert link.command(sent + 0.01 * MAX_WIDTH, 1.0) == pytest.approx(sent)
+
+
+def test_a_read_in_the_controllers_zero_transient_after_a_move_is_lost():
+    """The controller reads 0 % for a moment after MoveGripper; the bridge drops that reading
+    (fr5_rl.drivers.gripper_decisions.transient_zero), so the policy keeps the older one."""
+    link = BridgedGripper(TIMING, MAX_WIDTH)
+    link.reset(MAX_WIDTH, call_phase=0.0, read_phase=0.05, zero_transient=0.1)
+    link.command(0.0, 0.0)  # a move at t = 0
+    assert link.observe(0.07, 0.06) == pytest.approx(MAX_WIDTH)  # read at 0.05: inside the transient, lost
+    assert link.observe(0.05, 0.16) == pytest.approx(0.05, abs=0.0051 * MAX_WIDTH)  # read at 0.15: through
+    link.command(0.0101, 0.2)  # another move ...
+    assert link.observe(0.03, 0.26) == pytest.approx(0.05, abs=0.0051 * MAX_WIDTH)  # ... the read at 0.25 is lost
+    # A transient longer than the bridge's debounce would be passed on as a real 0: capped.
+    link.reset(MAX_WIDTH, 0.0, 0.0, zero_transient=5.0)
+    assert link.zero_transient == TIMING.zero_debounce
 
 
 def test_the_opening_is_read_back_at_the_read_rate_and_held():
@@ -92,3 +108,60 @@ def test_without_the_share_episodes_are_unchanged():
 def test_a_share_outside_zero_to_one_is_refused():
     with pytest.raises(ConfigError, match="gripper_bridge_share"):
         FR5Env(task="grasp", config={"randomisation": {**PERTURBED, "gripper_bridge_share": 1.5}})
+
+
+# ----------------------------------------------------------------------------- the camera's target
+def test_the_target_arrives_a_latency_after_each_frame_and_stands_until_the_next():
+    from fr5_rl.observation import DelayedTarget
+
+    target = DelayedTarget(latency=0.1, frame_period=1.0 / 15.0, phase=0.01)
+    seen = {}
+    for k in range(30):
+        now = 0.02 * k
+        seen[k] = target.observe((now, 0.0, 0.0), now, in_hand=False)[0]  # x = the time it was true
+    # Before the first frame is through: the scene at the start.
+    assert seen[5] == 0.0
+    for k in range(6, 30):
+        now = 0.02 * k
+        capture = 0.01 + ((now - 0.1 - 0.01) // (1.0 / 15.0)) * (1.0 / 15.0)
+        # The last period sampled at or before that capture: up to one period (20 ms) before it.
+        assert capture - 0.02 - 1e-9 <= seen[k] <= capture + 1e-9, (k, seen[k], capture)
+        assert now - seen[k] >= 0.1 - 1e-9
+    assert len(set(seen.values())) < 15  # held between frames
+
+
+def test_a_target_in_the_hand_is_seen_at_once():
+    from fr5_rl.observation import DelayedTarget
+
+    target = DelayedTarget(latency=0.15, frame_period=0.1, phase=0.0)
+    for k in range(20):
+        target.observe((0.02 * k, 0.0, 0.0), 0.02 * k, in_hand=False)
+    assert target.observe((9.0, 0.0, 0.0), 0.4, in_hand=True)[0] == 9.0
+
+
+def test_the_environment_sees_the_object_late_in_camera_episodes():
+    env = FR5Env(task="grasp", config={"randomisation": {**PERTURBED, "target_share": 1.0,
+                                                          "target_latency_s": [0.15, 0.15]}})
+    try:
+        env.reset(seed=2)
+        target = env._target
+        assert target is not None and target.latency == pytest.approx(0.15)
+        seen = []
+        observe = target.observe
+
+        def spy(position, now, in_hand):
+            result = observe(position, now, in_hand)
+            seen.append((now, result[0]))
+            return result
+
+        target.observe = spy
+        start = env.object_position().copy()
+        # Push the object 5 cm under the camera's nose: the policy sees it move one latency late.
+        env.world.place_object((start[0] + 0.05, start[1], start[2]), yaw=0.0)
+        for _ in range(15):
+            env.step(np.zeros(7))
+        first_seen = next(now for now, x in seen if x > start[0] + 0.04)
+        # Not before the latency; at most the phase, one frame and one period later.
+        assert 0.15 <= first_seen <= 0.15 + 2.0 / 15.0 + 0.02 + 1e-9
+    finally:
+        env.close()

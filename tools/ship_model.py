@@ -18,12 +18,11 @@ import sys
 from pathlib import Path
 from typing import List, Optional
 
-from benchlib import REPO
-
 from fr5_rl.deploy.bundle import META_FILE, MODEL_FILE, STATS_FILE, ModelFilesError, read_meta, write_json_atomic
 from fr5_rl.training.evaluation import plot_learning_curve
 from fr5_rl.training.onnx_export import PARITY_TOLERANCE, export, parity
 
+REPO = Path(__file__).resolve().parents[1]
 PARITY_OBSERVATIONS = 1000
 # summary.json key -> meta.json key (what evaluate.py copies into eval.json)
 FROM_SUMMARY = {"wall_time_s": "training_wall_time_s", "time_to_solve_s": "time_to_solve_s",

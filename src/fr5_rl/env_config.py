@@ -192,8 +192,18 @@ class RandomisationConfig:
     timing_share: float
     plain_episode_share: float
     gripper_bridge_share: float
+    target_share: float
+    target_latency_s: List[float]
+    target_rate_hz: float
 
     def check(self, source: str) -> None:
+        if not 0.0 <= self.target_share <= 1.0:
+            raise ConfigError(f"randomisation.target_share: {self.target_share} must be in [0, 1]")
+        low, high = self.target_latency_s
+        if not 0.0 <= low <= high:
+            raise ConfigError(f"randomisation.target_latency_s: {self.target_latency_s} must satisfy 0 <= low <= high (s)")
+        if self.target_rate_hz <= 0.0:
+            raise ConfigError(f"randomisation.target_rate_hz: {self.target_rate_hz} must be positive (Hz)")
         if not 0.0 <= self.gripper_bridge_share <= 1.0:
             raise ConfigError(f"randomisation.gripper_bridge_share: {self.gripper_bridge_share} must be in [0, 1]")
         if not 0.0 <= self.plain_episode_share < 1.0:

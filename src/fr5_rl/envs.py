@@ -26,7 +26,7 @@ from .env_config import EnvConfig, load_env_config
 from .control import ACTION_SIZE, JointCommandShaper, finite_values
 from .gripper import BridgedGripper, load_bridge_timing
 from .kinematics import ForwardKinematics
-from .observation import ActionHistory, ObservationBuilder, velocity_from_positions
+from .observation import ActionHistory, DelayedTarget, ObservationBuilder, velocity_from_positions
 from .sim.robot import FR5Robot
 from .sim.world import PyBulletWorld
 from .tasks import GraspTask, ReachTask, Task, TaskOutcome, TaskState
@@ -196,6 +196,8 @@ class FR5Env(gym.Env):
                               if self.cfg.randomisation.enabled and self.cfg.randomisation.gripper_bridge_share > 0.0
                               else None)
         self._bridge: Optional[BridgedGripper] = None
+        # randomisation.target_share: the object seen through the camera's timing, or None.
+        self._target: Optional[DelayedTarget] = None
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None
@@ -249,7 +251,8 @@ class FR5Env(gym.Env):
             width = self._bridge.command(width, self._steps * self.control_dt)
         early = self._run_period(targets, width)
         measured_early, age = early if early is not None else (None, 0.0)
-        state, obs = self._observe(measured_early, (self._steps + 1) * self.control_dt - age)
+        now = (self._steps + 1) * self.control_dt
+        state, obs = self._observe(measured_early, now - age, now)
         success, failure, terminated, truncated, _, outcome = self.judge_period(state)
         parts = self.task.reward(outcome, values)
         info: Dict[str, Any] = {"is_success": success, "failure": failure}
@@ -467,10 +470,12 @@ class FR5Env(gym.Env):
             tcp_in_workspace=x_low <= x <= x_high and y_low <= y <= y_high and z_low <= z <= z_high,
         )
 
-    def _observe(self, measured_early: Optional[tuple] = None, sample_time: float = 0.0) -> Tuple[TaskState, np.ndarray]:
+    def _observe(self, measured_early: Optional[tuple] = None, sample_time: float = 0.0,
+                 now: float = 0.0) -> Tuple[TaskState, np.ndarray]:
         """The task state now, and the observation: of the state now, or of the robot as
-        ``measured_early`` (an older joint state; the object is seen now). ``sample_time`` (s
-        since the reset) is when the observed joint state was sampled."""
+        ``measured_early`` (an older joint state; the object is seen now, or through the camera's
+        timing). ``sample_time`` (s since the reset) is when the observed joint state was
+        sampled, ``now`` the period's end."""
         self._state = state = self.task_state()
         q, tcp_position, tcp_axis, object_position = (
             state.joint_positions, state.tcp_position, state.tcp_approach_axis, state.object_position)
@@ -481,6 +486,12 @@ class FR5Env(gym.Env):
         self._observed_joint_positions = q
         if self._bridge is not None:
             width = self._bridge.observe(width, sample_time)
+        if self._target is not None:
+            # In the hand as the detector's tracker decides it: fingers closed to about the
+            # object's width, the tcp near its centre.
+            in_hand = (state.gripper_width <= 2.0 * self._object_dims[0] + 0.01
+                       and state.tcp_to_object_distance <= 0.04 and state.object_position[2] > self._object_rest_z + 0.005)
+            object_position = self._target.observe(object_position, now, in_hand)
         if self._obs_noise_std > 0.0:
             rng = self.np_random
             q = np.asarray(q) + rng.normal(0.0, self._obs_noise_std, 6)
@@ -557,4 +568,9 @@ class FR5Env(gym.Env):
             timing = self._bridge_model.timing
             self._bridge = self._bridge_model
             self._bridge.reset(self.robot_spec.max_opening_width, float(rng.uniform(0.0, timing.call_period)),
-                               float(rng.uniform(0.0, timing.read_period)))
+                               float(rng.uniform(0.0, timing.read_period)), float(rng.uniform(0.0, timing.zero_debounce)))
+        self._target = None
+        if on and rnd.target_share > 0.0 and rng.uniform() < rnd.target_share:
+            frame_period = 1.0 / rnd.target_rate_hz
+            self._target = DelayedTarget(float(rng.uniform(*rnd.target_latency_s)), frame_period,
+                                         float(rng.uniform(0.0, frame_period)))

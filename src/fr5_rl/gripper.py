@@ -61,11 +61,15 @@ class BridgeTiming:
     :param call_period: s between two ``MoveGripper`` calls at most (1 / ``max_call_rate``).
     :param read_period: s between two ``GetGripperCurPosition`` read-backs (1 / ``readback_rate``).
     :param deadband_percent: smallest change (%) sent as a new ``MoveGripper``.
+    :param zero_debounce: s after a ``MoveGripper`` in which the bridge drops a read-back of 0 %
+        (the controller reads 0 for a moment after a move): a read that falls in the controller's
+        transient is lost, and the policy keeps seeing the older one.
     """
 
     call_period: float
     read_period: float
     deadband_percent: int
+    zero_debounce: float
 
 
 class BridgedGripper:
@@ -74,7 +78,9 @@ class BridgedGripper:
     Commands: a new width goes out as whole percent, only when it moved past the deadband (the
     end stops always), and at most once per ``call_period``; the fingers carry out the last one
     sent. Observation: the opening read back every ``read_period`` in whole percent, held in
-    between. Both clocks start at a random phase (:meth:`reset`).
+    between; a read within the controller's zero transient after a move reads 0 and is dropped,
+    as the bridge drops it (:func:`fr5_rl.drivers.gripper_decisions.transient_zero`). Both clocks
+    start at a random phase and the transient is drawn per episode (:meth:`reset`).
 
     :param timing: the bridge's rates and deadband.
     :param max_width: the gripper's largest opening (m), = 100 %.
@@ -85,16 +91,21 @@ class BridgedGripper:
         self.sent: Optional[int] = None
         self.next_call = self.next_read = 0.0
         self.read_width = max_width
+        self.last_move_at: Optional[float] = None
+        self.zero_transient = 0.0
 
-    def reset(self, width: float, call_phase: float, read_phase: float) -> None:
+    def reset(self, width: float, call_phase: float, read_phase: float, zero_transient: float = 0.0) -> None:
         """A new episode with the fingers at ``width`` (m), sent and read back.
 
         :param call_phase: s until the first call may go out (0 … call_period).
         :param read_phase: s until the first read-back (0 … read_period).
+        :param zero_transient: s the controller reads 0 after a move (0 … the bridge's
+            ``zero_debounce``; longer ones the bridge would pass on as a real 0).
         """
         self.sent = width_to_percent(width, self.max_width)
         self.read_width = percent_to_width(self.sent, self.max_width)
         self.next_call, self.next_read = call_phase, read_phase
+        self.last_move_at, self.zero_transient = None, min(zero_transient, self.timing.zero_debounce)
 
     def command(self, width: float, now: float) -> float:
         """The width (m) the fingers are told to take at ``now`` (s) when ``width`` is wanted."""
@@ -102,13 +113,16 @@ class BridgedGripper:
         if now >= self.next_call and needs_move(wanted, self.sent, self.timing.deadband_percent):
             self.sent = wanted
             self.next_call = now + self.timing.call_period
+            self.last_move_at = now
         return percent_to_width(self.sent, self.max_width)
 
     def observe(self, measured_width: float, now: float) -> float:
         """The opening (m) the policy sees at ``now`` (s): the newest read-back of the fingers."""
         if now >= self.next_read:
-            self.read_width = percent_to_width(width_to_percent(min(self.max_width, max(0.0, measured_width)),
-                                                                self.max_width), self.max_width)
+            in_transient = self.last_move_at is not None and now - self.last_move_at < self.zero_transient
+            if not in_transient:
+                self.read_width = percent_to_width(width_to_percent(min(self.max_width, max(0.0, measured_width)),
+                                                                    self.max_width), self.max_width)
             while self.next_read <= now:
                 self.next_read += self.timing.read_period
         return self.read_width
@@ -116,7 +130,7 @@ class BridgedGripper:
 
 def load_bridge_timing(config_name: str = "gripper_bridge") -> BridgeTiming:
     """:class:`BridgeTiming` from the bridge's parameter file (``max_call_rate``, ``readback_rate``,
-    ``deadband_percent``): the environment models the bridge the node runs.
+    ``deadband_percent``, ``zero_debounce``): the environment models the bridge the node runs.
 
     :raises ConfigError: a rate that is not positive (a read-back rate of 0, off, leaves a
         policy that observes the opening without any reading).
@@ -126,4 +140,4 @@ def load_bridge_timing(config_name: str = "gripper_bridge") -> BridgeTiming:
     if call_rate <= 0 or read_rate <= 0:
         raise ConfigError(f"config/{config_name}.yaml: max_call_rate ({call_rate:g}) and readback_rate ({read_rate:g}) "
                           "must be positive for the environment to model the bridge")
-    return BridgeTiming(1.0 / call_rate, 1.0 / read_rate, int(params["deadband_percent"]))
+    return BridgeTiming(1.0 / call_rate, 1.0 / read_rate, int(params["deadband_percent"]), float(params["zero_debounce"]))

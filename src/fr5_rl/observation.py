@@ -293,3 +293,40 @@ class ObservationBuilder:
             return observation
         out[:] = observation
         return out
+
+
+class DelayedTarget:
+    """The object's position as a camera and the detector deliver it (``randomisation.target_share``).
+
+    Frames are captured every ``frame_period`` from ``phase`` on; each reaches the policy
+    ``latency`` after its capture and stands until the next one arrives. Before the first frame
+    arrives the scene at the episode's start is seen (the simulator holds a new scene until a
+    frame of it is through). Once the object is in the hand the detector's tracker publishes it
+    in the tcp frame, so it is seen without delay.
+
+    :param latency: s from capture to the policy node.
+    :param frame_period: s between two frames (1 / the camera's rate).
+    :param phase: s of the first capture after the episode's start (0 … frame_period).
+    """
+
+    def __init__(self, latency: float, frame_period: float, phase: float) -> None:
+        self.latency, self.frame_period, self.phase = latency, frame_period, phase
+        self.history: deque = deque()  # (time s, position) of every period, oldest first
+
+    def observe(self, position: Sequence[float], now: float, in_hand: bool) -> Sequence[float]:
+        """The position the policy sees at ``now`` (s since the episode's start).
+
+        :param position: the object's true position now (m, base_link).
+        :param in_hand: the object is held by the fingers (seen without delay).
+        """
+        self.history.append((now, position))
+        if in_hand:
+            return position
+        newest_capture = now - self.latency
+        if newest_capture < self.phase:
+            return self.history[0][1]
+        capture = self.phase + math.floor((newest_capture - self.phase) / self.frame_period + 1e-9) * self.frame_period
+        # The position at the capture: the last period sampled at or before it.
+        while len(self.history) > 1 and self.history[1][0] <= capture + 1e-9:
+            self.history.popleft()
+        return self.history[0][1]

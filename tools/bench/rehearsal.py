@@ -25,8 +25,26 @@ from typing import Any, Dict, List, Optional
 
 from benchlib import REPO, RESULTS_DIR, machine_info, update_summary, write_result
 from fr5_rl.deploy.bundle import read_meta
+from fr5_rl.env_config import load_env_config
+from fr5_rl.envs import FR5Env
 from fr5_rl.training.evaluation import wilson_interval
+from fr5_rl.training.success_map import write_success_map
 from roslaunch_run import run_launch
+
+def placed(records: List[Dict[str, Any]], task: str) -> List[Dict[str, Any]]:
+    """The records with the object's start position of each seed (the simulator's env places it
+    from the seed alone: no randomisation there)."""
+    env = FR5Env(task)
+    try:
+        out = []
+        for record in records:
+            _, info = env.reset(seed=int(record["seed"]))
+            x, y = (round(float(value), 4) for value in info["object_start"][:2])
+            out.append({**record, "object_x": x, "object_y": y})
+        return out
+    finally:
+        env.close()
+
 
 CHAINS = {
     "fairino": {"driver": "fairino"},
@@ -44,6 +62,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--seed", type=int, default=900_000, help="episode k places the object with seed + k")
     parser.add_argument("--port", type=int, default=11470)
     parser.add_argument("--results", type=Path, default=RESULTS_DIR)
+    parser.add_argument("--maps", action="store_true",
+                        help="also draw each run's success map by placement (map_<model>_<chain>.json/.png)")
     args = parser.parse_args(argv)
     rows: List[Dict[str, Any]] = []
     for model in args.models:
@@ -61,6 +81,11 @@ def main(argv: Optional[List[str]] = None) -> int:
                    "seeds": [args.seed, args.seed + args.episodes - 1], "wall_s": round(run.wall_s, 1),
                    "timed_out": run.timed_out, "records": run.records}
             rows.append(row)
+            if args.maps and run.records:
+                stem = args.results / f"map_{Path(model).name}_{chain}"
+                title = f"{model} through the {chain} chain, ROS rehearsal ({run.episodes} episodes)"
+                for written in write_success_map(placed(run.records, task), load_env_config(), stem, title):
+                    print(f"wrote {written}")
             print(f"{model:24s} {chain:15s} {run.successes}/{run.episodes}  95% CI {row['success_rate_95ci']}  "
                   f"failures {causes or '-'}  ({run.wall_s:.0f} s)", flush=True)
     args.results.mkdir(parents=True, exist_ok=True)

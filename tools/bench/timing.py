@@ -55,6 +55,7 @@ from fr5_rl.envs import FR5Env
 from fr5_rl.sim.controller_emulator import ControllerEmulator, ControllerEmulatorSettings
 from fr5_rl.sim.servo import ServoCycle
 from fr5_rl.training.evaluation import wilson_interval
+from fr5_rl.training.success_map import write_success_map
 
 TARGET_SUCCESS = 0.9
 
@@ -201,9 +202,10 @@ class ChainEmulation:
         """One episode as the real-time simulator runs it; its outcome and length in periods."""
         env, step = self.env, self.step
         if self.chain.episode_start == "go_to_start" and self.previous_end is not None:
-            env.reset(seed=seed, options={"arm_positions": self.previous_end})
+            _, info = env.reset(seed=seed, options={"arm_positions": self.previous_end})
         else:
-            env.reset(seed=seed)
+            _, info = env.reset(seed=seed)
+        object_start = info["object_start"]
         self.servo.reset(env.joint_positions())
         step.start_episode()
         positioning = self.chain.episode_start == "go_to_start"
@@ -246,7 +248,9 @@ class ChainEmulation:
                 if verdict_now.ended:
                     self._pause(arm_command)
                     self.previous_end = env.joint_positions().tolist()
-                    return {"seed": seed, "success": bool(verdict_now.success), "failure": verdict_now.failure,
+                    return {"seed": seed, "object_x": round(float(object_start[0]), 4),
+                            "object_y": round(float(object_start[1]), 4),
+                            "success": bool(verdict_now.success), "failure": verdict_now.failure,
                             "steps": (k - first_command_step) // self.per_period, "start_move_s": round(start_move_s, 3)}
             if k * self.physics_dt > 120.0:
                 raise RuntimeError(f"seed {seed}: no verdict after 120 s of simulated time (start move stuck?)")
@@ -279,6 +283,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         help="override the profile: teleport to a start around home, or the guard's start move")
     parser.add_argument("--results", type=Path, default=RESULTS_DIR)
     parser.add_argument("--name", default=None, help="result file stem (default timing_<task>_<profile>)")
+    parser.add_argument("--map", type=Path, default=None,
+                        help="also draw the success map by placement: MAP.json and MAP.png")
     args = parser.parse_args(argv)
 
     model_dir = Path(args.model) if Path(args.model).is_absolute() else REPO / args.model
@@ -318,6 +324,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                        "seed": args.seed, "successes": successes, "success_rate": rate, "success_ci95": [low, high],
                        "failures": failures, "records": records}, verdicts)
     update_summary(args.results, name, out)
+    if args.map is not None:
+        title = f"{relative_path(model_dir)} behind the {args.profile} chain, emulated ({len(records)} episodes)"
+        for path in write_success_map(records, trained, args.map, title):
+            print(f"wrote {path}")
     return 0
 
 
