@@ -457,3 +457,18 @@ def test_an_evaluation_keeps_the_settings_the_policy_depends_on_and_nothing_else
 ])
 def test_the_node_estimates_velocities_when_the_driver_or_the_training_says_so(driver, trained, estimated):
     assert velocities_from_positions(driver, trained) is estimated
+
+
+def test_a_new_episode_restarts_the_velocity_estimate_as_the_environment_does():
+    """The environment's first observation of an episode has velocities 0.0; the node's estimate
+    from the last episode's final state (the arm teleported, or moved by hand) must not leak in."""
+    reader = JointStateReader(ROBOT.joint_names, ROBOT.finger_joint_names, velocities_from_positions=True)
+    names = list(ROBOT.joint_names)
+    reader.update(names, [0.0] * 6, [], 1.00, 1.00)
+    reader.update(names, [0.01] * 6, [], 1.02, 1.02)
+    assert reader.reading().value.velocities == pytest.approx([0.5] * 6)
+    reader.restart_estimates()
+    reader.update(names, [0.3] * 6, [], 1.04, 1.04)
+    assert reader.reading().value.velocities == pytest.approx([0.0] * 6)  # not (0.3 - 0.01) / 0.02
+    reader.update(names, [0.31] * 6, [], 1.06, 1.06)
+    assert reader.reading().value.velocities == pytest.approx([0.5] * 6)  # estimating again from there

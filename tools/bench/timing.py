@@ -208,6 +208,7 @@ class ChainEmulation:
         object_start = info["object_start"]
         self.servo.reset(env.joint_positions())
         step.start_episode()
+        self.reader.restart_estimates()  # policy_node.on_reset
         positioning = self.chain.episode_start == "go_to_start"
         publish_phase, policy_phase = int(self.rng.integers(self.per_publish)), int(self.rng.integers(self.per_period))
         arm_command: Optional[Sequence[float]] = None

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
-from typing import Dict, Generic, Optional, Sequence, Tuple, TypeVar
+from typing import Dict, Generic, Optional, Sequence, Set, Tuple, TypeVar
 
 import numpy as np
 
@@ -91,6 +91,7 @@ class JointStateReader:
         # header stamp s or 0)
         self._joints: Dict[str, Tuple[float, float, float, float, float]] = {}
         self._problem: Optional[Tuple[str, float, frozenset]] = None  # text, received, joints it was about
+        self._restarted: Set[str] = set()  # joints whose next estimate starts from 0.0 (a new episode)
         self._lock = threading.Lock()
 
     def update(self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float],
@@ -118,8 +119,9 @@ class JointStateReader:
                     jump = self._implausible(name, position - previous[0], stamp - previous[2])
                 if len(velocities) == len(names) and not self._velocities_from_positions:
                     velocity = float(velocities[index])
-                elif previous is None:
+                elif previous is None or name in self._restarted:
                     velocity = 0.0
+                    self._restarted.discard(name)
                 else:
                     velocity = velocity_from_positions(position, previous[0], stamp - previous[2], previous[1])
                 self._joints[name] = (position, velocity, stamp, received, header_stamp)
@@ -129,6 +131,14 @@ class JointStateReader:
             if self._problem is not None and self._problem[2] <= set(names):
                 self._problem = None  # a good message brought every joint the bad one was about
         return None
+
+    def restart_estimates(self) -> None:
+        """A new episode: the next message's estimated velocities are 0.0, as an environment's
+        first observation of an episode has them (``observation.joint_velocity_source:
+        positions``), not the step from where the last episode left the arm. Positions and the
+        glitch check keep their history."""
+        with self._lock:
+            self._restarted = set(self._known)
 
     def _implausible(self, name: str, moved: float, elapsed: float) -> Optional[str]:
         """Why a joint's move since its last message cannot be real motion, or None."""

@@ -197,6 +197,7 @@ class PolicyNode:
         training start distribution and the policy has it (or the start move was refused)."""
         with self.inputs_changed:
             self.step.start_episode()
+            self.reader.restart_estimates()  # as the environment's first observation: velocities 0.0
         if self.step.guard is None or not self.step.enabled:
             return TriggerResponse(success=True, message="starting as a new episode")
         return self.wait_for_start("starting as a new episode")
