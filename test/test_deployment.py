@@ -472,3 +472,26 @@ def test_a_new_episode_restarts_the_velocity_estimate_as_the_environment_does():
     assert reader.reading().value.velocities == pytest.approx([0.0] * 6)  # not (0.3 - 0.01) / 0.02
     reader.update(names, [0.31] * 6, [], 1.06, 1.06)
     assert reader.reading().value.velocities == pytest.approx([0.5] * 6)  # estimating again from there
+
+
+def test_estimates_from_a_fast_driver_span_a_control_period():
+    """A 200 Hz driver with 1 ms of stamp jitter: from consecutive messages the estimate would
+    swing by +-40 %; over the 18 ms the environment's once-a-period samples span, by +-10 %."""
+    names = list(ROBOT.joint_names)
+    reader = JointStateReader(ROBOT.joint_names, ROBOT.finger_joint_names, velocities_from_positions=True,
+                              estimate_interval=0.018)
+    true_speed, estimates = 0.5, []
+    for k in range(60):
+        jitter = 0.001 if k % 2 else -0.001
+        stamp = 1.0 + 0.005 * k + jitter
+        reader.update(names, [true_speed * (stamp - 1.0)] * 6, [], stamp, stamp)
+        if k >= 5:
+            estimates.append(reader.reading().value.velocities[0])
+    assert max(abs(v - true_speed) for v in estimates) <= 0.1 * true_speed
+    # At 50 Hz (messages 20 ms apart) it is the consecutive-message estimate, as before.
+    slow = JointStateReader(ROBOT.joint_names, ROBOT.finger_joint_names, velocities_from_positions=True,
+                            estimate_interval=0.018)
+    slow.update(names, [0.0] * 6, [], 1.00, 1.00)
+    slow.update(names, [0.01] * 6, [], 1.02, 1.02)
+    slow.update(names, [0.03] * 6, [], 1.04, 1.04)
+    assert slow.reading().value.velocities == pytest.approx([1.0] * 6)

@@ -13,7 +13,8 @@ pytestmark = pytest.mark.slow  # every shipped model over many episodes: `make t
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 # model directory -> (task, episodes, minimum success rate); grasp_rl: PPO from reward alone.
-GATES = {"reach": ("reach", 50, 0.90), "grasp": ("grasp", 30, 0.85), "grasp_rl": ("grasp", 30, 0.85),
+GATES = {"reach": ("reach", 50, 0.90), "grasp": ("grasp", 30, 0.85), "grasp_dagger": ("grasp", 30, 0.85),
+         "grasp_rl": ("grasp", 30, 0.85),
          "grasp_robust": ("grasp", 30, 0.85)}
 
 

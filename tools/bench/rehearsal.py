@@ -65,6 +65,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--maps", action="store_true",
                         help="also draw each run's success map by placement (map_<model>_<chain>.json/.png)")
     args = parser.parse_args(argv)
+    args.results.mkdir(parents=True, exist_ok=True)
     rows: List[Dict[str, Any]] = []
     for model in args.models:
         # The simulator judges the model's own task; a relative path is the package's (as the launch reads it).

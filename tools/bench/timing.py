@@ -142,7 +142,8 @@ class ChainEmulation:
                                              trained_velocity_source)
         self.reader = JointStateReader(self.robot.joint_names, self.robot.finger_joint_names,
                                        velocities_from_positions=estimate,
-                                       max_joint_speeds=self.robot.velocity_limits * guard.glitch_speed_factor)
+                                       max_joint_speeds=self.robot.velocity_limits * guard.glitch_speed_factor,
+                                       estimate_interval=0.9 * env.control_dt)  # as policy_node
         self.clock = BenchClock()
         self.fault: Optional[str] = None
         self.emulator: Optional[ControllerEmulator] = None

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
-from typing import Dict, Generic, Optional, Sequence, Set, Tuple, TypeVar
+from typing import Dict, Generic, List, Optional, Sequence, Set, Tuple, TypeVar
 
 import numpy as np
 
@@ -65,8 +65,11 @@ class JointStateReader:
     arrays do not match its names, is refused as a whole and holds the arm until a good message
     brings the joints it was about. Velocities a driver leaves out, or all of them with
     ``velocities_from_positions`` (a driver whose velocities are not measured: the FAIRINO
-    driver's are all 0.0), are estimated per joint from consecutive positions and stamps, with
-    the same :func:`~fr5_rl.observation.velocity_from_positions` the environments use. A message
+    driver's are all 0.0), are estimated per joint from positions and stamps, with the same
+    :func:`~fr5_rl.observation.velocity_from_positions` the environments use, over at least
+    ``estimate_interval``: a driver publishing faster than the environment samples (a 200 Hz
+    simulator against one sample a control period) would otherwise divide a message's jitter by
+    5 ms instead of 20. A message
     whose arm positions imply a speed above ``max_joint_speeds`` (an encoder or driver glitch)
     holds the arm until two consecutive messages agree again. Thread-safe: ROS callbacks update,
     the timer reads.
@@ -76,10 +79,13 @@ class JointStateReader:
     :param velocities_from_positions: ignore the messages' velocities and estimate them.
     :param max_joint_speeds: rad/s per arm joint (controller order) that no real motion exceeds;
         None: no check.
+    :param estimate_interval: s an estimate spans at least (the sample before that is kept):
+        most of the control period the policy was trained at; 0 takes consecutive messages.
     """
 
     def __init__(self, arm_joint_names: Sequence[str], finger_joint_names: Sequence[str],
-                 velocities_from_positions: bool = False, max_joint_speeds: Optional[Sequence[float]] = None) -> None:
+                 velocities_from_positions: bool = False, max_joint_speeds: Optional[Sequence[float]] = None,
+                 estimate_interval: float = 0.0) -> None:
         self.arm_joint_names = tuple(arm_joint_names)
         self.finger_joint_names = tuple(finger_joint_names)
         self._known = set(self.arm_joint_names) | set(self.finger_joint_names)
@@ -92,6 +98,11 @@ class JointStateReader:
         self._joints: Dict[str, Tuple[float, float, float, float, float]] = {}
         self._problem: Optional[Tuple[str, float, frozenset]] = None  # text, received, joints it was about
         self._restarted: Set[str] = set()  # joints whose next estimate starts from 0.0 (a new episode)
+        self._estimate_interval = float(estimate_interval)
+        # name -> (position, stamp): the sample an estimate is taken against, at least
+        # estimate_interval before the newest (the newest one older than that).
+        self._reference: Dict[str, Tuple[float, float]] = {}
+        self._candidates: Dict[str, List[Tuple[float, float]]] = {}
         self._lock = threading.Lock()
 
     def update(self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float],
@@ -122,8 +133,11 @@ class JointStateReader:
                 elif previous is None or name in self._restarted:
                     velocity = 0.0
                     self._restarted.discard(name)
+                    self._reference.pop(name, None)
+                    self._candidates[name] = []
                 else:
-                    velocity = velocity_from_positions(position, previous[0], stamp - previous[2], previous[1])
+                    reference = self._reference_for(name, (previous[0], previous[2]), stamp)
+                    velocity = velocity_from_positions(position, reference[0], stamp - reference[1], previous[1])
                 self._joints[name] = (position, velocity, stamp, received, header_stamp)
             # Held from a jump until a message agrees with the one before it: the jump back from
             # a glitch is implausible too, the next real state is not.
@@ -131,6 +145,21 @@ class JointStateReader:
             if self._problem is not None and self._problem[2] <= set(names):
                 self._problem = None  # a good message brought every joint the bad one was about
         return None
+
+    def _reference_for(self, name: str, previous: Tuple[float, float], stamp: float) -> Tuple[float, float]:
+        """The (position, stamp) to estimate against at ``stamp``: the newest earlier sample at
+        least ``estimate_interval`` old, else the oldest one there is (lock held)."""
+        if self._estimate_interval <= 0.0:
+            return previous
+        candidates = self._candidates.setdefault(name, [])
+        candidates.append(previous)
+        reference = self._reference.get(name)
+        while candidates and stamp - candidates[0][1] >= self._estimate_interval - 1e-9:
+            reference = candidates.pop(0)
+        if reference is None:
+            reference = candidates[0]
+        self._reference[name] = reference
+        return reference
 
     def restart_estimates(self) -> None:
         """A new episode: the next message's estimated velocities are 0.0, as an environment's

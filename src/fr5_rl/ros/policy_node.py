@@ -120,7 +120,9 @@ class PolicyNode:
                                        velocities_from_positions=velocities_from_positions(
                                            params.joint_velocity_source, env_cfg.observation.joint_velocity_source),
                                        max_joint_speeds=(robot.velocity_limits * params.guard.glitch_speed_factor
-                                                         if params.motion_guard else None))
+                                                         if params.motion_guard else None),
+                                       # the environment estimates from one sample a control period
+                                       estimate_interval=0.9 * self.control_dt)
         self.gripper_fault: Optional[str] = None
         self.joint_state_stamp = rospy.Time(0)
         self.target: Optional[PoseStamped] = None
