@@ -440,7 +440,9 @@ def test_the_hint_turns_the_approach_axis_toward_straight_down():
         q = q + np.asarray(builder.joint_step_hint(q, tcp)) * HINT["joint_step_scale"]
     assert angles[0] > 25.0 and angles[-1] < 0.5
     assert angles[0] - angles[1] == pytest.approx(np.degrees(HINT["rotation_step"]), abs=0.5)  # the capped turn
-    assert np.all(np.diff(angles) < 1e-6)  # every step turns it further down
+    # Every step turns it further down, up to rounding: near straight down arccos turns a
+    # 1e-12 error in the rotation matrix into 1e-4 degrees.
+    assert np.all(np.diff(angles) < 1e-3)
 
 
 @pytest.mark.parametrize("bad", [{"cartesian_step": 0.015}, {**HINT, "extra": 1.0}, {**HINT, "damping": -0.05},
