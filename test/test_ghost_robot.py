@@ -54,3 +54,4 @@ def test_a_subtree_of_an_unknown_link_is_refused_with_the_links_there_are():
         subtree_description(URDF, "wrist4_Link")
     assert main(["--subtree", "wrist4_Link", str(Path(__file__).resolve().parent.parent / "urdf" / "fr5.urdf")]) == 2
     assert main(["--nonsense"]) == 2
+    assert main(["--help"]) == 0

@@ -77,6 +77,22 @@ def test_the_start_move_is_slow_synchronised_and_hands_over_at_home():
     assert np.abs(positions - HOME).max() <= GUARD.start_arrival
 
 
+def test_the_start_move_waits_at_home_until_the_arm_is_at_rest():
+    """Exactly at the start pose but still moving (velocities estimated from positions lag one
+    sample behind the last step): stand there until it settles, then hand over (this divided by
+    a distance of 0 and stopped the node's timer)."""
+    step = guarded(go_to_start=True)
+    away = HOME + np.array([0.4, 0.0, 0.0, 0.0, 0.0, 0.0])
+    assert step(at(away, NOW)).target_in_base is None  # the start move begins
+    moving = StepInputs(NOW + DT, joint_reading(HOME, received=NOW + DT, velocities=[0.3, 0, 0, 0, 0, 0]),
+                        Reading(TARGET, NOW + DT))
+    standing = step(moving)
+    assert isinstance(standing, Command) and standing.target_in_base is None
+    np.testing.assert_allclose(standing.arm_positions, HOME)
+    handed_over = step(at(HOME, NOW + 2 * DT))
+    assert isinstance(handed_over, Command) and handed_over.target_in_base is not None
+
+
 def test_an_unsafe_start_move_is_held():
     step = guarded(go_to_start=True)
     into_table = HOME.copy()

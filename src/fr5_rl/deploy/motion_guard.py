@@ -130,6 +130,8 @@ class MotionGuard:
             return None, None
         measured = np.asarray(measured, dtype=np.float64)
         gap = self.start_pose - measured
+        if distance <= 0.0:
+            return measured, None  # there, still settling: stand and let it come to rest
         # Every joint arrives together: the slowest-joint step scales all of them.
         scale = min(1.0, self.settings.start_speed * self.control_dt / distance)
         return measured + gap * scale, None

@@ -13,7 +13,7 @@ import sys
 import xml.etree.ElementTree as ET
 from typing import List, Optional, Tuple
 
-USAGE = "usage: robot_description.py --prefix PREFIX URDF | --subtree ROOT URDF"
+USAGE = "usage: robot_description.py --prefix PREFIX URDF | --subtree ROOT URDF"  # stdout on --help, stderr on a mistake
 
 
 def _robot(urdf: str) -> ET.Element:
@@ -85,6 +85,9 @@ def subtree_description(urdf: str, root: str) -> Tuple[str, List[str]]:
 
 def main(argv: Optional[List[str]] = None) -> int:
     args = sys.argv[1:] if argv is None else argv
+    if args and args[0] in ("-h", "--help"):
+        print(USAGE + "\n\n" + __doc__.split("\n\n")[1].strip())
+        return 0
     if len(args) != 3 or args[0] not in ("--prefix", "--subtree"):
         print(USAGE, file=sys.stderr)
         return 2
