@@ -59,13 +59,21 @@ class TestVisionTopics(unittest.TestCase):
             p = target.pose.position
             found = (base_from_optical @ np.array([p.x, p.y, p.z, 1.0]))[:3]
             q = truth.pose.position
+            # Only objects the gripper cannot hide or have nudged: the tcp 10 cm or more away.
+            # Near it the tracker republishes the last sighting (stamped with the new image), and
+            # a cup the fingers brushed has moved by then: that is tracking, not detection.
+            try:
+                tcp = buffer.lookup_transform("base_link", "tcp", target.header.stamp, rospy.Duration(0.5)).transform.translation
+            except (tf2_ros.LookupException, tf2_ros.ExtrapolationException, tf2_ros.ConnectivityException):
+                continue
+            if np.linalg.norm([tcp.x - q.x, tcp.y - q.y, tcp.z - q.z]) < 0.10:
+                continue
             errors.append(float(np.linalg.norm(found - [q.x, q.y, q.z])))
         self.assertGreaterEqual(len(errors), 5, "too few detections matched to the ground truth of their instant")
         rospy.loginfo(f"detector error vs truth (m): {errors}")
-        # Within 1 cm at the median: the tracker republishes the last seen position (stamped with
-        # the new image) while the gripper hides the object, and a nudged object has moved by then;
-        # a free object's detection error is measured by bench_vision.py (p95 1.75 mm).
-        self.assertLess(float(np.median(errors)), 0.01)
+        # A free object within 5 mm at the median (tools/bench/vision.py measures p95 1.75 mm with
+        # the arm at its start pose; here the image may be one frame older than the truth's stamp).
+        self.assertLess(float(np.median(errors)), 0.005)
 
 
 if __name__ == "__main__":
