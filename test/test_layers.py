@@ -52,7 +52,9 @@ GRAPH = import_graph()
 # control, transforms: the shared layer) imports only the shared layer.
 ALLOWED = {
     "ros": {"ros", "deploy", "perception", "drivers", "shared", "envs", "sim", "tasks"},
-    "cli": {"training", "deploy", "shared", "envs", "expert", "sim", "tasks", "cli"},
+    "cli": {"training", "deploy", "shared", "envs", "expert", "sim", "tasks", "cli", "sim_to_real"},
+    # Record, replay, compare and fit (compare_run.py, fit_driver.py): tools, never deployed.
+    "sim_to_real": {"sim_to_real", "shared", "envs", "sim", "tasks"},
     "training": {"training", "deploy", "shared", "envs", "expert", "sim", "tasks"},
     "deploy": {"deploy", "shared"},
     "perception": {"perception", "shared"},

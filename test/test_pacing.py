@@ -66,3 +66,14 @@ def test_time_schedule_is_due_once_per_period_from_its_last_due_time():
     schedule = TimeSchedule(0.1)
     due = [round(k * 0.02, 2) for k in range(16) if schedule.due(k * 0.02)]
     assert due == [0.0, 0.1, 0.2, 0.3]
+
+
+def test_a_late_loop_still_knows_when_each_step_was_true_on_the_wall_clock():
+    # A driver stamps its read with when the state was true; a loop 30 ms late catching up must not
+    # stamp the states it computes with the time it got round to them.
+    clock = FakeClock()
+    pacer = WallClockPacer(physics_dt=0.01, max_catch_up=10, clock=clock)
+    clock.now += 0.03
+    times = [pacer.wall_time for _ in pacer.due_steps()]
+    assert times == pytest.approx([100.01, 100.02, 100.03])
+    assert pacer.wall_time - 0.01 == pytest.approx(100.02)  # the last step began at 20 ms

@@ -32,7 +32,7 @@ debian_ros_packages=(
   python3-tf2-ros python3-tf2-geometry-msgs python3-sensor-msgs python3-geometry-msgs
   python3-std-msgs python3-std-srvs python3-visualization-msgs ros-diagnostic-msgs python3-diagnostic-msgs
   catkin librostest-dev liburdfdom-tools catkin-lint python3-venv python3-pip
-  xvfb x11-apps imagemagick python3-message-filters libegl1 libegl-mesa0
+  xvfb x11-apps imagemagick python3-message-filters libegl1 libegl-mesa0 python3-rosbag
 )
 # The same on Ubuntu 20.04 with the ROS Noetic apt repository.
 noetic_packages=(
@@ -41,7 +41,7 @@ noetic_packages=(
   ros-noetic-tf2-ros ros-noetic-tf2-geometry-msgs ros-noetic-sensor-msgs ros-noetic-geometry-msgs
   ros-noetic-std-msgs ros-noetic-std-srvs ros-noetic-visualization-msgs ros-noetic-diagnostic-msgs
   liburdfdom-tools python3-catkin-lint python3-venv python3-pip xvfb x11-apps imagemagick
-  ros-noetic-message-filters libegl1 libegl-mesa0
+  ros-noetic-message-filters ros-noetic-rosbag libegl1 libegl-mesa0
 )
 
 as_root() {

@@ -195,8 +195,12 @@ class RandomisationConfig:
     target_share: float
     target_latency_s: List[float]
     target_rate_hz: float
+    response_time_constant_s: List[float]  # s per joint, [] none
 
     def check(self, source: str) -> None:
+        taus = self.response_time_constant_s
+        if taus and (len(taus) != 6 or min(taus) < 0.0):
+            raise ConfigError(f"randomisation.response_time_constant_s: {taus} must be [] or 6 values >= 0 (s)")
         if not 0.0 <= self.target_share <= 1.0:
             raise ConfigError(f"randomisation.target_share: {self.target_share} must be in [0, 1]")
         low, high = self.target_latency_s

@@ -28,6 +28,7 @@ from .gripper import BridgedGripper, load_bridge_timing
 from .kinematics import ForwardKinematics
 from .observation import ActionHistory, DelayedTarget, ObservationBuilder, velocity_from_positions
 from .sim.robot import FR5Robot
+from .sim.servo import FirstOrderResponse
 from .sim.world import PyBulletWorld
 from .tasks import GraspTask, ReachTask, Task, TaskOutcome, TaskState
 from .transforms import quaternion_z_axis
@@ -182,7 +183,9 @@ class FR5Env(gym.Env):
         # ranges (s) drawn every step, and the command standing until a delayed one takes over.
         self._command_delay_range = (0.0, 0.0)
         self._observation_age_range = (0.0, 0.0)
-        self._period_timing = False  # either range above is non-zero: step's slower path
+        self._period_timing = False  # either range above is non-zero, or a response: step's slower path
+        # randomisation.response_time_constant_s: the driver's lag in episodes with the timing, or None.
+        self._response: Optional[FirstOrderResponse] = None
         self._standing_command: Tuple[Sequence[float], float] = ((), 0.0)
         self._steps = 0
         self._state: Optional[TaskState] = None  # the last one observed
@@ -198,6 +201,7 @@ class FR5Env(gym.Env):
         self._bridge: Optional[BridgedGripper] = None
         # randomisation.target_share: the object seen through the camera's timing, or None.
         self._target: Optional[DelayedTarget] = None
+        self._held = None  # hold_object's constraint (the camera's calibration), or None
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None
@@ -227,6 +231,8 @@ class FR5Env(gym.Env):
         self.task.reset()
         self._action_queue.clear()
         self._standing_command = (tuple(start), self._gripper_command_width)
+        if self._response is not None:
+            self._response.reset(start)
         self._steps = 0
         self._velocity_sample = None
         state, obs = self._observe()
@@ -368,6 +374,23 @@ class FR5Env(gym.Env):
         self.robot.command(arm_targets, self._gripper_command_width)
         self.world.step()
 
+    def hold_object(self, object_in_tcp: Sequence[float]) -> None:
+        """Fix the object in the gripper, its centre at ``object_in_tcp`` (m, tcp frame), as a
+        person's hand-over into the closed gripper leaves it (the camera's calibration); the
+        episode is not judged meanwhile (the caller's business). :meth:`release_object` lets go."""
+        from .sim.held_object import HeldObject
+
+        self.release_object()
+        self._held = HeldObject(self.world.client, self.robot.body, self.robot.tcp_link, self.world.object_id,
+                                [self.world.table_id])
+        self._held.hold(object_in_tcp)
+
+    def release_object(self) -> None:
+        """Let go of an object held by :meth:`hold_object` (nothing if none is)."""
+        held, self._held = self._held, None
+        if held is not None:
+            held.release()
+
     def judge_period(self, state: Optional[TaskState] = None) -> EpisodeVerdict:
         """Count and judge one control period of the episode: the task's success and failure
         tests, and the step limit (``"timeout"``). :meth:`step` calls it once per step; a
@@ -405,6 +428,8 @@ class FR5Env(gym.Env):
         substeps, physics_dt = self.world.substeps, self.world.physics_dt
         delay = self._draw_substeps(self._command_delay_range, substeps - 1)
         age = self._draw_substeps(self._observation_age_range, substeps - 1)
+        if self._response is not None:
+            return self._run_period_with_response(arm_targets, gripper_width, delay, age)
         if delay == 0 and age == 0:
             self.advance_period(arm_targets, gripper_width)
             self._standing_command = (arm_targets, gripper_width)
@@ -416,6 +441,22 @@ class FR5Env(gym.Env):
             if substep == delay:
                 self.robot.command(arm_targets, gripper_width, period=(substeps - delay) * physics_dt)
             if substep == substeps - age:
+                measured = self.robot.measure()
+            self.world.step_physics()
+        self._gripper_command_width = float(gripper_width)
+        self._standing_command = (arm_targets, gripper_width)
+        return (measured, age * physics_dt) if measured is not None else None
+
+    def _run_period_with_response(self, arm_targets: Sequence[float], gripper_width: float, delay: int,
+                                  age: int) -> Optional[Tuple[tuple, float]]:
+        """:meth:`_run_period` behind a driver's response: every physics step the joints get the
+        lagged targets, as the simulator node gives them (one motor call per step)."""
+        physics_dt, measured = self.world.physics_dt, None
+        substeps = self.world.substeps
+        for substep in range(substeps):
+            targets, width = self._standing_command if substep < delay else (arm_targets, gripper_width)
+            self.robot.command(self._response.targets_for_step(targets), width, period=physics_dt)
+            if substep == substeps - age and age:
                 measured = self.robot.measure()
             self.world.step_physics()
         self._gripper_command_width = float(gripper_width)
@@ -562,7 +603,12 @@ class FR5Env(gym.Env):
             timing = bool(rng.uniform() < timing_share)
         self._command_delay_range = tuple(rnd.command_delay_s) if timing else (0.0, 0.0)
         self._observation_age_range = tuple(rnd.observation_age_s) if timing else (0.0, 0.0)
-        self._period_timing = self._command_delay_range[1] > 0.0 or self._observation_age_range[1] > 0.0
+        self._response = None
+        if timing and any(tau > 0.0 for tau in rnd.response_time_constant_s):
+            self._response = FirstOrderResponse(rnd.response_time_constant_s, physics_dt,
+                                                self.robot_spec.home_joint_positions)
+        self._period_timing = (self._command_delay_range[1] > 0.0 or self._observation_age_range[1] > 0.0
+                               or self._response is not None)
         self._bridge = None
         if on and self._bridge_model is not None and rng.uniform() < rnd.gripper_bridge_share:
             timing = self._bridge_model.timing

@@ -23,9 +23,15 @@ class StaticTransform:
 
 @dataclass(frozen=True)
 class StaticTransforms:
-    """``config/static_transforms.yaml``: every transform published on /tf_static."""
+    """``config/static_transforms.yaml``: every transform published on /tf_static.
+
+    ``simulator_default`` marks the shipped file, whose camera mount is the simulator's: a real
+    cell must measure its own (``calibrate_camera.py`` writes a file without the mark), and
+    ``real_policy.launch`` warns loudly while the mark is there.
+    """
 
     transforms: List[StaticTransform]
+    simulator_default: bool = False
 
     def check(self, source: str) -> None:
         for index, item in enumerate(self.transforms):

@@ -73,6 +73,10 @@ def main(argv: Optional[List[str]] = None) -> int:
         for chain in args.chains:
             arguments = {"rviz": False, "model": model, "task": task, "episodes": args.episodes,
                          "seed": args.seed, **CHAINS[chain]}
+            if arguments.get("driver") == "fairino":
+                # The emulated controller's port follows the master's: a second rehearsal on the
+                # machine (another bench, a rostest) must not drive this one's gripper.
+                arguments["controller_port"] = args.port + 36000
             run = run_launch(arguments, port=args.port, episodes=args.episodes)
             causes: Dict[str, int] = {}
             for cause in run.failures:

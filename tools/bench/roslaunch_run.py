@@ -192,6 +192,28 @@ def _stop(launch: subprocess.Popen) -> Optional[int]:
     return None
 
 
+class SideLaunch:
+    """A second launch on a running launch's master (e.g. record.launch beside the rehearsal),
+    started by :meth:`start` and stopped (SIGINT, as Ctrl-C: rosbag closes its bag) by :meth:`stop`.
+
+    :param launch_file: the launch file in this package; ``arguments`` its NAME:=VALUE pairs.
+    """
+
+    def __init__(self, launch_file: str, arguments: Mapping[str, Any], port: int) -> None:
+        self.command = launch_command(arguments, port, launch_file)
+        self.port = port
+        self.process: Optional[subprocess.Popen] = None
+
+    def start(self) -> "SideLaunch":
+        env = dict(os.environ, ROS_MASTER_URI=master_uri(self.port))
+        self.process = subprocess.Popen(self.command, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, env=env,
+                                        start_new_session=True, preexec_fn=_default_sigint)
+        return self
+
+    def stop(self) -> Optional[int]:
+        return _stop(self.process) if self.process is not None else None
+
+
 def run_launch(arguments: Mapping[str, Any], *, port: int, episodes: int, launch_file: str = "sim_policy.launch",
                timeout: Optional[float] = None, listen: Optional[Callable[[], Iterable[Any]]] = None,
                node_name: str = "bench", poll_s: float = 0.1) -> LaunchRun:

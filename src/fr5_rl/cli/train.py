@@ -5,6 +5,7 @@ Examples::
     rosrun fr5_rl train.py --task reach                   # PPO, config/ppo_reach.yaml
     rosrun fr5_rl train.py --task grasp --algo tqc --n-envs 2 --timesteps 300000
     rosrun fr5_rl train.py --resume --run-dir runs/reach_ppo_20261122-1300
+    rosrun fr5_rl train.py --task reach --driver-profile fitted.yaml   # fit_driver.py's profile
 """
 from __future__ import annotations
 
@@ -51,6 +52,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "available core, at most n_envs; 1 = --no-subprocess); speed only, results are the same")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--torch-threads", type=int, default=1, help="(1)")
+    parser.add_argument("--driver-profile", default=None, metavar="PROFILE.yaml",
+                        help="draw the driver's timing and response from this profile (fit_driver.py's, or written "
+                             "by hand) in the perturbed episodes, over the hyperparameter file's")
     return parser
 
 
@@ -74,7 +78,8 @@ def train_run(args: argparse.Namespace) -> TrainRun:
                     checkpoint_freq=args.checkpoint_freq, eval_freq=args.eval_freq, eval_episodes=args.eval_episodes,
                     target_success=args.target_success, stop_at_success=args.stop_at_success,
                     eval_min_training_success=args.eval_min_training_success, subprocess=not args.no_subprocess,
-                    processes=args.processes, progress=not args.no_progress, torch_threads=args.torch_threads)
+                    processes=args.processes, progress=not args.no_progress, torch_threads=args.torch_threads,
+                    driver_profile=args.driver_profile)
 
 
 def main(argv: Optional[List[str]] = None) -> int:

@@ -25,6 +25,11 @@ camera_color_optical_frame (and camera_aligned_depth_to_color_frame) is ``~frame
 ``~publish_tf`` true (the wrapper's default) this node publishes that chain on /tf_static; with
 false the launch must (static_transforms_node.py). Either way the picture is taken from
 ``~frame_id``'s pose through both files, read once at start. Parameters: ``config/camera.yaml``.
+
+``~mount_offset`` (dx dy dz m, droll dpitch dyaw rad; default zeros) is a hidden mount error,
+for rehearsing the camera's calibration: the picture is taken from the configured mount composed
+with this offset in the camera_link frame (T_base_link · T(offset), URDF fixed-axis rpy), while
+every transform on tf stays the configured one, as with a real camera mounted slightly off.
 """
 from __future__ import annotations
 
@@ -44,6 +49,7 @@ from visualization_msgs.msg import Marker
 from ..config import ConfigError, load_robot_spec
 from ..env_config import load_env_config
 from ..perception.camera_model import Intrinsics, IntrinsicsError
+from ..perception.hand_eye import offset_transform
 from ..sim.camera import RENDERERS, SimulatedCamera, depth_to_millimetres
 from ..transforms import load_transform_files, transform_in
 from .images import camera_info_message, image_message
@@ -104,6 +110,7 @@ class CameraNodeParams:
     publish_tf: bool
     mount_config: str
     frames_config: str
+    mount_offset: List[float]
     joint_states_topic: str
     object_topic: str
     color_topic: str
@@ -114,7 +121,8 @@ class CameraNodeParams:
     def transforms(self) -> Tuple[np.ndarray, List[Dict]]:
         """Read the frames once: ``~frame_id``'s pose in ``~base_frame`` (4x4, m), the mount and
         then the camera's chain, the same transforms tf carries, so the picture is taken where
-        tf says it is; and the chain's entries (``~frames_config``), for /tf_static.
+        tf says it is, unless ``~mount_offset`` moves the render pose (not the entries) off it;
+        and the chain's entries (``~frames_config``), for /tf_static.
 
         :raises ConfigError: a file is wrong, a frame has a parent in both files, the chain does
             not give ``frame_id`` a parent, or the files do not connect it to ``base_frame``.
@@ -123,7 +131,14 @@ class CameraNodeParams:
         frames = [entry for entry in entries if entry["source"] == self.frames_config]
         if self.frame_id not in {entry["child"] for entry in frames}:
             raise ConfigError(f"{self.frames_config}: no transform to the camera's frame_id {self.frame_id}")
-        return transform_in(entries, self.base_frame, self.frame_id), frames
+        if not any(self.mount_offset):  # bit for bit the configured chain
+            return transform_in(entries, self.base_frame, self.frame_id), frames
+        # The chain's root (camera_link): the one parent in the camera's file that is no child there.
+        children = {entry["child"] for entry in frames}
+        root = next(entry["parent"] for entry in frames if entry["parent"] not in children)
+        render = (transform_in(entries, self.base_frame, root) @ offset_transform(self.mount_offset)
+                  @ transform_in(frames, root, self.frame_id))
+        return render, frames
 
     def intrinsics(self) -> Intrinsics:
         """The pinhole model these parameters describe (raises IntrinsicsError if invalid)."""
@@ -132,6 +147,9 @@ class CameraNodeParams:
     def check(self, source: str) -> None:
         if self.renderer not in RENDERERS:
             raise ConfigError(f"{source}: 'renderer' must be one of {RENDERERS}, got {self.renderer!r}")
+        if len(self.mount_offset) != 6 or not np.all(np.isfinite(self.mount_offset)):
+            raise ConfigError(f"{source}: 'mount_offset' must be 6 finite numbers (dx dy dz m, droll dpitch dyaw "
+                              f"rad), got {self.mount_offset}")
         if self.rate <= 0 or not 0 < self.near < self.far or self.depth_noise < 0:
             raise ConfigError(f"{source}: needs rate > 0, 0 < near < far, depth_noise >= 0")
         try:

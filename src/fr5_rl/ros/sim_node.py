@@ -7,8 +7,10 @@ against it:
   unless ``~publish_finger_joints`` is false, stamped) at ``~publish_rate``;
 - obeys ``~command_topic`` (std_msgs/Float64MultiArray, 6 positions in rad, in controller order
   j1..j6 — ros_control's JointGroupPositionController contract: a message of the wrong length is
-  dropped with a throttled error) through the driver's servo cycle (``~servo_rate``,
-  ``~servo_delay_cycles``), and ``~gripper_command_topic`` (std_msgs/Float64, opening width in m);
+  dropped with a throttled error) from the physics step that runs when it arrived, through the
+  driver's servo cycle (``~servo_rate``, ``~servo_delay_cycles``) and response (a first-order lag
+  per joint, ``~response_time_constant_s``: a driver profile, docs/sim_to_real.md), and
+  ``~gripper_command_topic`` (std_msgs/Float64, opening width in m);
 - acts as the camera: the object's pose on ``~target_topic`` (geometry_msgs/PoseStamped) in
   ``~camera_frame``, computed with config/static_transforms.yaml and optional noise (unless
   ``~publish_target`` is false: a detector on a simulated camera publishes it instead);
@@ -53,14 +55,14 @@ from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, String
-from std_srvs.srv import Trigger, TriggerResponse
+from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..config import ConfigError, check_positive, whole_multiple
 from ..envs import EpisodeVerdict, FR5Env, JointStates
 from ..sim.controller_emulator import ControllerEmulator, ControllerEmulatorSettings
 from ..sim.pacing import AlignedStepSchedule, StepSchedule, TimeSchedule, WallClockPacer
-from ..sim.servo import ServoCycle
+from ..sim.servo import FirstOrderResponse, ServoCycle
 from ..transforms import load_static_transforms, matrix_from_quaternion, quaternion_from_matrix, transform_in
 from .params import exit_if_help_asked, node_parameters
 from .sim_messages import joint_state_message, object_marker, scene_markers
@@ -96,6 +98,7 @@ class SimNodeParams:
     publish_finger_joints: bool
     servo_rate: float
     servo_delay_cycles: int
+    response_time_constant_s: List[float]
     lockstep: bool
     lockstep_command_timeout: float
     lockstep_gripper: bool
@@ -106,6 +109,9 @@ class SimNodeParams:
     def check(self, source: str) -> None:
         if self.servo_rate < 0 or self.servo_delay_cycles < 0:
             raise ConfigError(f"{source}: servo_rate and servo_delay_cycles must be >= 0 (0: no servo cycle)")
+        taus = self.response_time_constant_s
+        if taus and (len(taus) != 6 or min(taus) < 0):
+            raise ConfigError(f"{source}: response_time_constant_s must be [] or 6 values >= 0 (s, j1..j6), got {taus}")
         check_positive(source, lockstep_command_timeout=self.lockstep_command_timeout)
         if self.gripper_interface not in ("topic", "xmlrpc"):
             raise ConfigError(f"{source}: 'gripper_interface' must be topic or xmlrpc, got {self.gripper_interface!r}")
@@ -138,9 +144,10 @@ class SimulatorNode:
         self.params = params = node_parameters(SimNodeParams, "sim_node")
         task = params.task
         if params.lockstep:
-            if params.servo_rate > 0:
+            if params.servo_rate > 0 or any(params.response_time_constant_s):
                 raise ConfigError("sim_node: lockstep advances whole control periods as gym does; it cannot also "
-                                  "model a servo cycle: set ~servo_rate 0 (driver:=default) or ~lockstep false")
+                                  "model a servo cycle or response: set ~servo_rate 0 and "
+                                  "~response_time_constant_s [] (driver:=default) or ~lockstep false")
             self.env = FR5Env(task=task)  # the gym world, as `evaluate.py` builds it
         else:
             # The stand-in arm runs at its own physics step, finer than reach training uses.
@@ -160,6 +167,9 @@ class SimulatorNode:
                 raise ConfigError(f"sim_node: 1 / servo_rate ({1.0 / params.servo_rate:g} s) must be a whole "
                                   f"multiple of physics_dt ({self.physics_dt:g} s)")
         self.servo = ServoCycle(steps_per_servo, params.servo_delay_cycles, self.spec.home_joint_positions)
+        # The driver's response (a driver profile's lag per joint; none by default).
+        self.response = FirstOrderResponse(params.response_time_constant_s, self.physics_dt,
+                                           self.spec.home_joint_positions)
         self.base_in_camera = np.linalg.inv(
             transform_in(load_static_transforms(), self.spec.base_frame, params.camera_frame))
         self.rng = np.random.default_rng(params.seed)  # camera noise
@@ -189,6 +199,9 @@ class SimulatorNode:
         self.tcp_path: deque = deque(maxlen=300)  # tcp positions (m, base_link), one per control period
         self.late_periods = 0  # lockstep: periods of this episode that went without a command
         self.arm_command: Optional[Tuple[float, ...]] = None  # newest arm command (rad), None: none yet
+        # Real time: commands with their arrival (monotonic s), taken up by the physics step that
+        # runs at that time; a loop catching up on late steps must not apply them early.
+        self.arriving: deque = deque()
         self.gripper_target = self.spec.max_opening_width
         self.commanded = False  # episodes are timed from the first command
         self.holding = True  # between episodes: commands are ignored until the next one starts
@@ -215,6 +228,9 @@ class SimulatorNode:
             rospy.Subscriber(params.gripper_command_topic, Float64, self._on_gripper_command, queue_size=1,
                              tcp_nodelay=True)
         rospy.Service("~reset", Trigger, self._on_reset)
+        # Camera calibration (calibrate_camera.py): the cup fixed in the closed gripper, no episodes.
+        self.calibrating = False
+        rospy.Service("~calibration", SetBool, self._on_calibration)
         if not params.lockstep:  # lockstep starts its first episode once the policy node is up
             with self.lock:
                 self._start_episode()
@@ -238,6 +254,7 @@ class SimulatorNode:
         params, env = self.params, self.env
         rate = rospy.Rate(1.0 / self.physics_dt)
         pacer = WallClockPacer(self.physics_dt, max_catch_up=10 * self.steps_per_publish)
+        ros_minus_monotonic = rospy.Time.now().to_sec() - time.monotonic()
         judge = StepSchedule(whole_multiple(env.control_dt, self.physics_dt) or 1)
         publish = AlignedStepSchedule(self.steps_per_publish)
         camera, markers = TimeSchedule(1.0 / params.camera_rate), TimeSchedule(1.0 / params.marker_rate)
@@ -253,16 +270,22 @@ class SimulatorNode:
                 if self.controller is not None:
                     self._follow_controller()
                 for step in pacer.due_steps():
-                    env.advance_physics(self.servo.targets_for_step(self.arm_command), self.gripper_target)
+                    step_start = pacer.wall_time - self.physics_dt
+                    while self.arriving and self.arriving[0][0] <= step_start:
+                        self.arm_command = self.arriving.popleft()[1]
+                    env.advance_physics(self.response.targets_for_step(self.servo.targets_for_step(self.arm_command)),
+                                        self.gripper_target)
                     if not self.commanded:
                         judge.restart(step)  # episodes are timed from the first command
-                    elif not self.holding and judge.due(step):
+                    elif not self.holding and not self.calibrating and judge.due(step):
                         verdict = env.judge_period()
                         if verdict.ended:
                             self._finish_episode(verdict, pacer.sim_time)
                         self.tcp_path.append(tuple(env.tcp_position()))
                 if publish.due(pacer.step):
-                    stamp = rospy.Time.now()
+                    # Stamped when the state was true (a driver stamps its read), not when a
+                    # late loop got to publish it: replays and velocity estimates need the former.
+                    stamp = rospy.Time.from_sec(pacer.wall_time + ros_minus_monotonic)
                     self._publish_state(stamp)
                     if self.target_pub is not None and camera.due(pacer.sim_time):
                         self.target_pub.publish(self._camera_message(stamp))
@@ -375,7 +398,10 @@ class SimulatorNode:
         else:
             self.env.reset(seed=self.params.seed + self.episode)
         self.arm_command = None
-        self.servo.reset(self.env.joint_positions())
+        self.arriving.clear()
+        # A driver's servo loop runs on across episodes: its cycle keeps its phase.
+        self.servo.reset(self.env.joint_positions(), restart_cycle=False)
+        self.response.reset(self.env.joint_positions())
         self.gripper_target = self.spec.max_opening_width
         self.commanded = False  # episodes are timed from the first command
         self.late_periods = 0
@@ -440,7 +466,10 @@ class SimulatorNode:
         self.results.append(bool(verdict.success))
         record = {"episode": self.episode, "seed": self.params.seed + self.episode - 1,
                   "success": bool(verdict.success), "failure": verdict.failure or "", "steps": verdict.steps,
-                  "sim_time": round(sim_time, 3)}
+                  "sim_time": round(sim_time, 3),
+                  # How long the simulated arm now ignores commands (a pause no real arm makes):
+                  # compare_run.py leaves it out of a recorded rehearsal.
+                  "hold_s": self.params.pause_between_episodes + self.params.reset_settle_time}
         if self.params.lockstep:
             record["late_periods"] = self.late_periods
         self.outcome_pub.publish(String(data=json.dumps(record)))
@@ -453,6 +482,7 @@ class SimulatorNode:
         self.holding = True
         self.hold_until = time.monotonic() + self.params.pause_between_episodes
         self.arm_command = tuple(self.env.joint_positions())
+        self.arriving.clear()
 
     # ------------------------------------------------------------------ callbacks
     def _on_arm_command(self, message: Float64MultiArray) -> None:
@@ -469,7 +499,10 @@ class SimulatorNode:
         with self.lock:
             if not self.holding:
                 self.commanded = self.commanded or not self.positioning
-                self.arm_command = tuple(clamped.tolist())
+                if self.params.lockstep:
+                    self.arm_command = tuple(clamped.tolist())
+                else:
+                    self.arriving.append((time.monotonic(), tuple(clamped.tolist())))
             self.new_command = True
             self.command_arrived.notify_all()
 
@@ -483,6 +516,30 @@ class SimulatorNode:
                 self.gripper_target = float(np.clip(width, 0.0, self.spec.max_opening_width))
             self.new_gripper_command = True
             self.command_arrived.notify_all()
+
+    def _on_calibration(self, request) -> SetBoolResponse:
+        """~calibration (std_srvs/SetBool), real time only. True: a calibration session: the cup
+        is fixed in the closed gripper (config/calibration.yaml ``simulator.object_in_tcp``, as a
+        person's hand-over would leave it), arm commands are obeyed, no episode is judged or
+        reset. False: the cup is let go and a new episode starts."""
+        from ..perception.hand_eye import load_calibration_settings
+
+        if self.params.lockstep:
+            return SetBoolResponse(success=False, message="calibration runs in real time only")
+        with self.lock:
+            env = self.env
+            if request.data and not self.calibrating:
+                env.hold_object(load_calibration_settings().simulator.object_in_tcp)
+                self.calibrating = True
+                self.arriving.clear()
+                self.holding = self.settling = self.positioning = False
+                self.arm_command = tuple(env.joint_positions())
+                self.gripper_target = float(env.scene().object_size[0])  # closed on the cup
+            elif not request.data and self.calibrating:
+                env.release_object()
+                self.calibrating = False
+                self._start_episode()
+        return SetBoolResponse(success=True, message=f"calibration {'on' if request.data else 'off'}")
 
     def _on_reset(self, _request) -> TriggerResponse:
         with self.lock:

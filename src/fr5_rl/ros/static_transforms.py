@@ -7,6 +7,9 @@ before, so every transform of every file goes out in a single call. Parameters:
   e.g. ``[static_transforms, camera_frames]`` when the camera driver's ``publish_tf`` is false;
   default: the package's config/static_transforms.yaml. A frame given a parent in two files is
   refused.
+- ``~warn_simulator_mount`` (bool, default false; real_policy.launch: true): while a file still
+  carries ``simulator_default: true`` (the shipped camera mount, the simulator's), log a loud
+  warning at start and every minute: on a real cell the camera is somewhere else.
 """
 from __future__ import annotations
 
@@ -17,8 +20,8 @@ import rospy
 import tf2_ros
 from geometry_msgs.msg import TransformStamped
 
-from ..config import ConfigError
-from ..transforms import load_transform_files, quaternion_from_matrix
+from ..config import ConfigError, load_typed
+from ..transforms import StaticTransforms, load_transform_files, quaternion_from_matrix
 from .params import exit_if_help_asked
 
 
@@ -54,15 +57,39 @@ def config_files(value: Union[str, Sequence[str]]) -> List[str]:
     return list(files)
 
 
+def simulator_mount_files(files: Sequence[str], entries: Sequence[Dict]) -> List[str]:
+    """The files among ``files`` marked ``simulator_default`` that set a camera mount (a
+    transform to a frame whose name starts with ``camera``)."""
+    mounting = {entry["source"] for entry in entries if entry["child"].startswith("camera")}
+    return [path for path in files if path in mounting and load_typed(StaticTransforms, path).simulator_default]
+
+
+def simulator_mount_warning(files: Sequence[str]) -> str:
+    """The warning's text (several lines, so it stands out in a launch's output)."""
+    bar = "!" * 78
+    return (f"\n{bar}\n  CAMERA MOUNT NOT CALIBRATED: {', '.join(files)} is the SIMULATOR's camera pose\n"
+            f"  (simulator_default: true). On a real cell every target seen by the camera lands\n"
+            f"  where the simulated camera would have seen it, not where the object is.\n"
+            f"  Calibrate first: rosrun fr5_rl calibrate_camera.py --out my_mount.yaml, then\n"
+            f"  real_policy.launch static_transforms:=$(pwd)/my_mount.yaml (docs/sim_to_real.md).\n{bar}")
+
+
 def main() -> None:
     exit_if_help_asked("static_transforms_node.py", __doc__.split("\n\n")[0] + "\n\n~config: a path or a name in "
                        "config/, or a list of them (default: static_transforms)")
     rospy.init_node("static_transforms")
     try:
-        entries = load_transform_files(config_files(rospy.get_param("~config", "static_transforms")))
+        files = config_files(rospy.get_param("~config", "static_transforms"))
+        entries = load_transform_files(files)
+        uncalibrated = simulator_mount_files(files, entries) if rospy.get_param("~warn_simulator_mount", False) else []
     except ConfigError as error:
         rospy.logfatal(f"static_transforms: {error}")
         sys.exit(1)
+    if uncalibrated:
+        warning = simulator_mount_warning(uncalibrated)
+        rospy.logwarn(warning)
+        # Kept on as long as the node runs: a warning at start-up scrolls away.
+        rospy.Timer(rospy.Duration(60.0), lambda _event: rospy.logwarn(warning))
     broadcaster = tf2_ros.StaticTransformBroadcaster()
     broadcaster.sendTransform(to_messages(entries, rospy.Time.now()))
     rospy.loginfo("published %d static transforms: %s", len(entries),

@@ -36,6 +36,12 @@ class WallClockPacer:
         """Simulated time (s) since the start."""
         return self.step * self.physics_dt
 
+    @property
+    def wall_time(self) -> float:
+        """When, on the wall clock (s, the clock's own), the simulated arm is where the last
+        step left it: what a driver stamps the state it read with, however late the loop ran."""
+        return self._start + self.sim_time
+
     def due_steps(self) -> Iterator[int]:
         """The physics steps the wall clock says are due now, each yielded after it is counted
         (the caller runs it): a command then acts as long in simulation as it did in reality,

@@ -7,8 +7,9 @@ boundary, then one more cycle, before the arm starts moving toward it.
 """
 from __future__ import annotations
 
+import math
 from collections import deque
-from typing import Deque, Optional, Sequence, Tuple
+from typing import Deque, List, Optional, Sequence, Tuple
 
 
 class ServoCycle:
@@ -30,12 +31,19 @@ class ServoCycle:
         self.delay_cycles = int(delay_cycles) if steps_per_cycle else 0
         self.reset(initial)
 
-    def reset(self, targets: Sequence[float]) -> None:
-        """Hold ``targets`` (rad) with nothing in flight, as after the driver starts."""
+    def reset(self, targets: Sequence[float], restart_cycle: bool = True, phase_steps: int = 0) -> None:
+        """Hold ``targets`` (rad) with nothing in flight.
+
+        :param restart_cycle: True: the next step begins a cycle, as after the driver starts;
+            False: the cycle keeps its phase (a real driver's loop runs on across episodes).
+        :param phase_steps: with ``restart_cycle``, the physics steps already done in the first
+            cycle (0 .. steps_per_cycle - 1): where the cycle's boundaries fall.
+        """
         self.applied: Tuple[float, ...] = tuple(float(value) for value in targets)
         self._latched = self.applied
         self._in_flight: Deque[Tuple[float, ...]] = deque([self.applied] * self.delay_cycles)
-        self._steps = 0
+        if restart_cycle or not hasattr(self, "_steps"):
+            self._steps = int(phase_steps) % self.steps_per_cycle if self.steps_per_cycle else 0
 
     def targets_for_step(self, newest_command: Optional[Sequence[float]]) -> Tuple[float, ...]:
         """The targets the arm tracks during the next physics step.
@@ -54,3 +62,44 @@ class ServoCycle:
             self.applied = self._in_flight.popleft()
         self._steps += 1
         return self.applied
+
+
+class FirstOrderResponse:
+    """How a servo follows the targets it is given: a first-order lag per joint.
+
+    Each physics step every joint's applied target moves the fraction ``1 - exp(-dt / tau)``
+    of the way to the newest target: a step command is followed with time constant ``tau``.
+    A real controller filters and tracks its servo stream (the FR5's ``ServoJ`` takes a filter
+    time), with a response that differs per joint as the loads do; a stiff simulated position
+    controller has almost none. A lag is what a driver profile can state and the fit can
+    recover; tau = 0 leaves a joint's targets as they are.
+
+    :param time_constants: (n,) tau per joint (s, >= 0), controller order; empty: no lag.
+    :param physics_dt: the physics step (s) between calls of :meth:`targets_for_step`.
+    :param initial: the targets (rad) held before any command.
+    """
+
+    def __init__(self, time_constants: Sequence[float], physics_dt: float, initial: Sequence[float]) -> None:
+        if any(not math.isfinite(tau) or tau < 0.0 for tau in time_constants):
+            raise ValueError(f"response time constants must be finite and >= 0 s, got {list(time_constants)}")
+        if physics_dt <= 0.0:
+            raise ValueError(f"physics_dt must be > 0 s, got {physics_dt}")
+        self.time_constants = tuple(float(tau) for tau in time_constants)
+        self._fractions = [1.0 - math.exp(-physics_dt / tau) if tau > 0.0 else 1.0 for tau in self.time_constants]
+        self.active = any(tau > 0.0 for tau in self.time_constants)
+        self.reset(initial)
+
+    def reset(self, targets: Sequence[float]) -> None:
+        """Hold ``targets`` (rad): the joints are at rest there."""
+        self.applied: List[float] = [float(value) for value in targets]
+
+    def targets_for_step(self, targets: Sequence[float]) -> Tuple[float, ...]:
+        """The lagged targets (rad) for the next physics step, given the servo's ``targets``."""
+        if not self.active:
+            self.applied = [float(value) for value in targets]
+            return tuple(self.applied)
+        if len(targets) != len(self._fractions):
+            raise ValueError(f"{len(targets)} targets for {len(self._fractions)} response time constants")
+        self.applied = [held + fraction * (float(target) - held)
+                        for held, target, fraction in zip(self.applied, targets, self._fractions)]
+        return tuple(self.applied)

@@ -64,6 +64,10 @@ class TrainRun:
         ``spawn`` inside a Ray worker (forking a process that runs Ray's threads can hang).
     :param progress: show a progress bar.
     :param torch_threads: threads of torch's CPU operations (at least 1 is used).
+    :param driver_profile: a driver profile (``fit_driver.py``'s, or written by hand; a path or a
+        name in ``config/``) whose servo delay, state age, physics step and response the
+        perturbed episodes draw (:meth:`fr5_rl.sim.driver_profile.DriverProfile.env_randomisation`),
+        over the hyperparameter file's; None: the file's own.
     """
 
     task: str = "reach"
@@ -86,6 +90,7 @@ class TrainRun:
     start_method: str = "forkserver"
     progress: bool = True
     torch_threads: int = 1
+    driver_profile: Optional[str] = None
 
     def check(self) -> None:
         """Refuse values no run can use.
@@ -129,7 +134,9 @@ class TrainRun:
                 "checkpoint_freq": self.checkpoint_freq, "eval_freq": self.eval_freq,
                 "eval_episodes": self.eval_episodes, "no_subprocess": not self.subprocess,
                 "target_success": self.target_success,
-                "eval_min_training_success": float(self.eval_min_training_success), **extra}
+                "eval_min_training_success": float(self.eval_min_training_success),
+                # a record only: the profile's randomisation is in hyperparams_resolved, which a resume reads
+                "driver_profile": self.driver_profile, **extra}
 
 
 # config.json keys that differ from the field's name (kept as they were: older runs resume too)

@@ -9,6 +9,7 @@ The run's settings are a :class:`~fr5_rl.training.run_settings.TrainRun`.
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import os
@@ -277,6 +278,29 @@ def load_trained(model_dir: Path, algo_cls, venv, **load_kwargs: Any):
     return algo_cls.load(model_dir / MODEL_FILE, env=venv, device="cpu", **load_kwargs), venv
 
 
+def with_driver_profile(hyper: Hyperparameters, profile_path: str, source: str) -> Hyperparameters:
+    """``hyper`` with a driver profile's timing and response in its environment's randomisation
+    (saved so in the run's config.json: a resumed run keeps them).
+
+    :raises ConfigError: the profile is invalid, or the file's randomisation is off (the
+        profile's driver is drawn in the perturbed episodes; there would be none).
+    """
+    from ..sim.driver_profile import load_driver_profile
+
+    profile = load_driver_profile(profile_path)
+    env = copy.deepcopy(dict(hyper.env))
+    randomisation = dict(env.get("randomisation") or {})
+    if not randomisation.get("enabled", False):
+        raise ConfigError(f"--driver-profile {profile_path}: {source} has env.randomisation.enabled false; the "
+                          "profile's driver is drawn in the perturbed episodes: use a file with randomisation "
+                          "(e.g. ppo_reach or ppo_grasp_chain)")
+    randomisation.update(profile.env_randomisation())
+    env["randomisation"] = randomisation
+    updated = dataclasses.replace(hyper, env=env)
+    updated.check(f"{source} with --driver-profile {profile_path}")
+    return updated
+
+
 def train(run: TrainRun, t_start: Optional[float] = None,
           extra_callbacks: Optional[Callable[[Path, Dict[str, Any], Dict[str, Any]], Sequence[Any]]] = None) -> int:
     """Run (or resume) one training run; returns the exit status (0 done, 130 interrupted).
@@ -306,6 +330,8 @@ def train(run: TrainRun, t_start: Optional[float] = None,
     else:
         source = str(hyperparameter_source(run.algo, run.task, run.hyperparams))
         hyper = load_hyperparameters(run.algo, run.task, run.hyperparams)
+        if run.driver_profile:
+            hyper = with_driver_profile(hyper, run.driver_profile, source)
         run = dataclasses.replace(
             run, n_envs=run.n_envs or hyper.n_envs, timesteps=int(run.timesteps or hyper.n_timesteps),
             run_dir=run.run_dir if run.run_dir is not None
