@@ -85,9 +85,13 @@ def main() -> int:
     for entry in errors.values():
         entry.pop("replay")
     # The pictures as a user makes them: the command line, fitted against shipped.
-    subprocess.run([sys.executable, str(REPO / "scripts" / "compare_run.py"), str(bag), "--out", str(args.results / "gap"),
-                    "--driver-profile", str(fitted_path), "--baseline-profile", settings["base_profile"], "--force"],
-                   check=True)
+    def shown(path: Path) -> str:  # paths in the report as the repository's, where they are in it
+        path = path.resolve()
+        return str(path.relative_to(REPO)) if path.is_relative_to(REPO) else str(path)
+
+    subprocess.run([sys.executable, str(REPO / "scripts" / "compare_run.py"), shown(bag), "--out",
+                    shown(args.results / "gap"), "--driver-profile", shown(fitted_path), "--baseline-profile",
+                    settings["base_profile"], "--force"], check=True, cwd=REPO)
     tau_errors_ms = [1000.0 * (f - h) for f, h in zip(fit.profile.response_time_constant_s,
                                                        hidden.response_time_constant_s)]
     ratio = errors["shipped"]["rms_rad"] / max(errors["fitted"]["rms_rad"], 1e-12)

@@ -3,6 +3,7 @@
 Each module parses arguments and hands off to library code; errors in files or configuration
 become one line on stderr and exit status 2. Nothing imports these modules but the scripts.
 """
+import argparse
 import sys
 from typing import List, Optional
 
@@ -16,3 +17,11 @@ def fail(program: str, error: BaseException) -> int:
     """Print ``error`` as one line naming ``program``; the exit status for a refused input."""
     print(f"{program}: {error}", file=sys.stderr)
     return 2
+
+
+def parser_from_doc(program: str, doc: str) -> argparse.ArgumentParser:
+    """An argument parser whose description is ``doc``'s first paragraph and whose epilog is the
+    rest (examples keep their layout)."""
+    return argparse.ArgumentParser(prog=program, description=doc.split("\n\n")[0].strip("`"),
+                                   epilog=doc.split("\n\n", 1)[1] if "\n\n" in doc else None,
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)

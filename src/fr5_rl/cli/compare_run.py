@@ -27,13 +27,11 @@ from ..sim.driver_profile import load_driver_profile, profile_summary
 from ..sim_to_real.compare import joint_table, plot_joints, run_report
 from ..sim_to_real.fit import replay_error
 from ..sim_to_real.recording import RecordingError, read_recording
-from . import fail, script_args
+from . import fail, parser_from_doc, script_args
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="compare_run.py", description=__doc__.split("\n\n")[0].strip("`"),
-                                     epilog=__doc__.split("\n\n", 1)[1],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = parser_from_doc("compare_run.py", __doc__)
     parser.add_argument("bag", type=Path, help="a run recorded with record.launch")
     parser.add_argument("--out", type=Path, required=True, help="directory for report.json and the pictures")
     parser.add_argument("--driver-profile", default=None,

@@ -25,13 +25,11 @@ from ..deploy.bundle import write_json_atomic
 from ..sim.driver_profile import load_driver_profile, profile_summary, write_driver_profile
 from ..sim_to_real.fit import FitSettings, fit_driver
 from ..sim_to_real.recording import RecordingError, read_recording
-from . import fail, script_args
+from . import fail, parser_from_doc, script_args
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="fit_driver.py", description=__doc__.split("\n\n")[0].strip("`"),
-                                     epilog=__doc__.split("\n\n", 1)[1],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = parser_from_doc("fit_driver.py", __doc__)
     parser.add_argument("bag", type=Path, help="a run recorded with record.launch (the policy node moving the arm)")
     parser.add_argument("--out", type=Path, required=True, help="the profile to write (YAML)")
     parser.add_argument("--base-profile", default=None,
