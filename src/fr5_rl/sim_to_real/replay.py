@@ -28,15 +28,10 @@ class Replay:
     :param positions: (n, 6) rad at the recording's joint state stamps.
     :param segments: (start, end) indices into the joint states of each stretch replayed
         without a restart.
-    :param fine: per segment, (steps + 1, 6) rad at every physics step from the segment's start
-        (only with ``keep_fine``), for fits that filter the response afterwards.
-    :param sample_steps: per segment, the physics step each of its joint states is taken at.
     """
 
     positions: np.ndarray
     segments: List[Tuple[int, int]]
-    fine: List[np.ndarray]
-    sample_steps: List[np.ndarray]
 
 
 def replay_segments(recording: RunRecording, velocity_limits: Sequence[float], margin: float = 2.0,
@@ -106,12 +101,11 @@ class Replayer:
         self.env.close()
 
     def run(self, recording: RunRecording, profile: DriverProfile, phase_steps: int = 0,
-            keep_fine: bool = False, response: Optional[Sequence[float]] = None) -> Replay:
+            response: Optional[Sequence[float]] = None) -> Replay:
         """Replay ``recording`` behind ``profile``.
 
         :param phase_steps: physics steps of the servo cycle already done at the first joint
             state (where its boundaries fall against the stamps; a fit tries each).
-        :param keep_fine: also keep every physics step's positions (:attr:`Replay.fine`).
         :param response: time constants (s) instead of the profile's.
         :raises ValueError: the profile's physics step is not this replayer's.
         """
@@ -122,8 +116,6 @@ class Replayer:
         taus = list(profile.response_time_constant_s if response is None else response) or [0.0] * 6
         out = np.zeros_like(recording.positions)
         segments = replay_segments(recording, self.spec.velocity_limits)
-        fine_all: List[np.ndarray] = []
-        samples_all: List[np.ndarray] = []
         commands, command_times = recording.commands, recording.command_times
         for start, end in segments:
             t0 = recording.state_times[start]
@@ -140,9 +132,6 @@ class Replayer:
             width = (float(recording.gripper_widths[gripper_pointer - 1]) if gripper_pointer > 0
                      else self.spec.max_opening_width)
             total = int(sample_steps[-1])
-            fine = np.empty((total + 1, 6)) if keep_fine else None
-            if fine is not None:
-                fine[0] = first
             sample_index = 1
             out[start] = first
             for step in range(total):
@@ -156,15 +145,10 @@ class Replayer:
                     gripper_pointer += 1
                 self.env.advance_physics(lag.targets_for_step(servo.targets_for_step(newest)), width)
                 done = step + 1
-                if fine is not None:
-                    fine[done] = self.env.joint_positions()
                 while sample_index < len(sample_steps) and sample_steps[sample_index] <= done:
-                    out[start + sample_index] = fine[done] if fine is not None else self.env.joint_positions()
+                    out[start + sample_index] = self.env.joint_positions()
                     sample_index += 1
-            if fine is not None:
-                fine_all.append(fine)
-            samples_all.append(sample_steps)
-        return Replay(out, segments, fine_all, samples_all)
+        return Replay(out, segments)
 
 
 def tracking_errors(recording: RunRecording, replay: Replay) -> np.ndarray:
