@@ -200,7 +200,7 @@ def test_replay_segments_split_at_resets_and_leave_out_the_pauses():
 
 
 def test_replaying_behind_the_right_profile_reproduces_the_run(hidden_profile, hidden_run):
-    from fr5_rl.sim_to_real.fit import replay_error
+    from fr5_rl.sim_to_real.replay import replay_error
 
     right = replay_error(hidden_run, hidden_profile)
     wrong = replay_error(hidden_run, load_driver_profile("sim_node_fairino"))

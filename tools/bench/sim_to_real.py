@@ -31,7 +31,8 @@ from roslaunch_run import SideLaunch, run_launch  # noqa: E402
 
 from fr5_rl.config import load_robot_spec, load_yaml, typed  # noqa: E402
 from fr5_rl.sim.driver_profile import load_driver_profile, profile_summary, write_driver_profile  # noqa: E402
-from fr5_rl.sim_to_real.fit import FitSettings, fit_driver, replay_error  # noqa: E402
+from fr5_rl.sim_to_real.fit import FitSettings, fit_driver  # noqa: E402
+from fr5_rl.sim_to_real.replay import replay_error  # noqa: E402
 from fr5_rl.sim_to_real.recording import read_recording  # noqa: E402
 
 

@@ -25,7 +25,7 @@ from ..config import ConfigError, load_robot_spec, load_yaml
 from ..deploy.bundle import write_json_atomic
 from ..sim.driver_profile import load_driver_profile, profile_summary
 from ..sim_to_real.compare import joint_table, plot_joints, run_report
-from ..sim_to_real.fit import replay_error
+from ..sim_to_real.replay import replay_error
 from ..sim_to_real.recording import RecordingError, read_recording
 from . import fail, parser_from_doc, script_args
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional
 
 import numpy as np
 
@@ -161,24 +161,3 @@ def fit_driver(recording: RunRecording, base: DriverProfile, settings: FitSettin
     finally:
         replayer.close()
     return FitResult(profile, int(best["phase_steps"]), report["rms_rad"], candidates, report["per_joint"])
-
-
-def replay_error(recording: RunRecording, profile: DriverProfile, task: str = "reach",
-                 phases: Optional[Sequence[int]] = None) -> Dict[str, Any]:
-    """A profile's replay error on a run, at the servo phase that fits best (the recording does
-    not say where the driver's cycle boundaries fell).
-
-    :return: :func:`~fr5_rl.sim_to_real.replay.summary` plus ``phase_steps`` and the replay.
-    """
-    steps_per_cycle = (whole_multiple(profile.servo_period, profile.physics_dt) or 1) if profile.servo_rate > 0 else 1
-    replayer = Replayer(task, profile.physics_dt)
-    best: Optional[Dict[str, Any]] = None
-    try:
-        for phase in (phases if phases is not None else range(steps_per_cycle)):
-            replay = replayer.run(recording, profile, phase_steps=phase)
-            report = summary(tracking_errors(recording, replay), recording.joint_names)
-            if best is None or report["rms_rad"] < best["rms_rad"]:
-                best = {**report, "phase_steps": phase, "replay": replay}
-    finally:
-        replayer.close()
-    return best

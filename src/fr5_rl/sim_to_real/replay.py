@@ -170,3 +170,24 @@ def summary(errors: np.ndarray, joint_names: Sequence[str]) -> Dict[str, Any]:
         "per_joint": {name: {"rms_rad": float(r), "max_rad": float(m), "rms_deg": float(np.degrees(r)),
                              "max_deg": float(np.degrees(m))} for name, r, m in zip(joint_names, rms, largest)},
     }
+
+
+def replay_error(recording: RunRecording, profile: DriverProfile, task: str = "reach",
+                 phases: Optional[Sequence[int]] = None) -> Dict[str, Any]:
+    """A profile's replay error on a run, at the servo phase that fits best (the recording does
+    not say where the driver's cycle boundaries fell).
+
+    :return: :func:`summary` plus ``phase_steps`` and the replay.
+    """
+    steps_per_cycle = (whole_multiple(profile.servo_period, profile.physics_dt) or 1) if profile.servo_rate > 0 else 1
+    replayer = Replayer(task, profile.physics_dt)
+    best: Optional[Dict[str, Any]] = None
+    try:
+        for phase in (phases if phases is not None else range(steps_per_cycle)):
+            replay = replayer.run(recording, profile, phase_steps=phase)
+            report = summary(tracking_errors(recording, replay), recording.joint_names)
+            if best is None or report["rms_rad"] < best["rms_rad"]:
+                best = {**report, "phase_steps": phase, "replay": replay}
+    finally:
+        replayer.close()
+    return best
