@@ -294,3 +294,11 @@ def test_the_rehearsal_recorded_with_record_launch_gives_back_its_hidden_driver(
     assert max(abs(error) for error in result["response_error_ms"]) < 5.0
     assert result["rms_ratio_shipped_over_fitted"] >= 5.0
     assert (tmp_path / "gap" / "report.json").is_file() and (tmp_path / "fitted_profile.yaml").is_file()
+
+
+@pytest.mark.parametrize("taus", [[0.05] * 5, [0.05] * 5 + [-0.01]])
+def test_the_environment_refuses_a_response_that_is_not_one_lag_per_joint(taus):
+    from fr5_rl.env_config import load_env_config
+
+    with pytest.raises(ConfigError, match="response_time_constant_s"):
+        load_env_config({"randomisation": {"response_time_constant_s": taus}})

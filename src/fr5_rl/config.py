@@ -7,11 +7,12 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 import os
 import typing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional, Type, TypeVar
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Type, TypeVar
 
 import numpy as np
 import yaml
@@ -257,3 +258,13 @@ def check_positive(source: str, **values: float) -> None:
     for name, value in values.items():
         if not value > 0:
             raise ConfigError(f"{source}: '{name}' must be positive, got {value}")
+
+
+def check_time_constants(source: str, name: str, values: Sequence[float], count: int = 6) -> None:
+    """Refuse a per-joint list of time constants (s) that is neither empty (none) nor ``count``
+    finite values >= 0, naming it and ``source``: a driver's response
+    (``response_time_constant_s``), wherever a profile, the simulator node or the environment
+    reads one."""
+    if values and (len(values) != count or not all(math.isfinite(v) and v >= 0.0 for v in values)):
+        raise ConfigError(f"{source}: '{name}' must be [] or {count} values >= 0 s (one per joint, j1..j{count}), "
+                          f"got {list(values)}")

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Union
 
-from .config import ConfigError, deep_update, load_robot_spec, load_yaml, typed, whole_multiple
+from .config import ConfigError, check_time_constants, deep_update, load_robot_spec, load_yaml, typed, whole_multiple
 
 
 @dataclass(frozen=True)
@@ -198,9 +198,7 @@ class RandomisationConfig:
     response_time_constant_s: List[float]  # s per joint, [] none
 
     def check(self, source: str) -> None:
-        taus = self.response_time_constant_s
-        if taus and (len(taus) != 6 or min(taus) < 0.0):
-            raise ConfigError(f"randomisation.response_time_constant_s: {taus} must be [] or 6 values >= 0 (s)")
+        check_time_constants("randomisation", "response_time_constant_s", self.response_time_constant_s)
         if not 0.0 <= self.target_share <= 1.0:
             raise ConfigError(f"randomisation.target_share: {self.target_share} must be in [0, 1]")
         low, high = self.target_latency_s

@@ -58,7 +58,7 @@ from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..config import ConfigError, check_positive, whole_multiple
+from ..config import ConfigError, check_positive, check_time_constants, whole_multiple
 from ..envs import EpisodeVerdict, FR5Env, JointStates
 from ..sim.controller_emulator import ControllerEmulator, ControllerEmulatorSettings
 from ..sim.pacing import AlignedStepSchedule, StepSchedule, TimeSchedule, WallClockPacer
@@ -109,9 +109,7 @@ class SimNodeParams:
     def check(self, source: str) -> None:
         if self.servo_rate < 0 or self.servo_delay_cycles < 0:
             raise ConfigError(f"{source}: servo_rate and servo_delay_cycles must be >= 0 (0: no servo cycle)")
-        taus = self.response_time_constant_s
-        if taus and (len(taus) != 6 or min(taus) < 0):
-            raise ConfigError(f"{source}: response_time_constant_s must be [] or 6 values >= 0 (s, j1..j6), got {taus}")
+        check_time_constants(source, "response_time_constant_s", self.response_time_constant_s)
         check_positive(source, lockstep_command_timeout=self.lockstep_command_timeout)
         if self.gripper_interface not in ("topic", "xmlrpc"):
             raise ConfigError(f"{source}: 'gripper_interface' must be topic or xmlrpc, got {self.gripper_interface!r}")

@@ -25,7 +25,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence
 
 import yaml
 
-from ..config import ConfigError, load_yaml, whole_multiple
+from ..config import ConfigError, check_time_constants, load_yaml, whole_multiple
 
 #: The keys a profile's driver model is read from (the rest are simulator-node parameters).
 MODEL_KEYS = ("servo_rate", "servo_delay_cycles", "response_time_constant_s", "physics_dt", "publish_rate")
@@ -70,10 +70,7 @@ class DriverProfile:
         if whole_multiple(1.0 / self.publish_rate, self.physics_dt) is None:
             raise ConfigError(f"{where}: 1 / publish_rate ({1.0 / self.publish_rate:g} s) must be a whole multiple "
                               f"of physics_dt ({self.physics_dt:g} s)")
-        taus = self.response_time_constant_s
-        if taus and (len(taus) != n_joints or any(not math.isfinite(t) or t < 0.0 for t in taus)):
-            raise ConfigError(f"{where}: response_time_constant_s must be empty or {n_joints} values >= 0 s "
-                              f"(one per joint, j1..j{n_joints}), got {taus}")
+        check_time_constants(where, "response_time_constant_s", self.response_time_constant_s, n_joints)
 
     @property
     def servo_period(self) -> float:
