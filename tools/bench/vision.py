@@ -13,7 +13,10 @@
 
 Writes bench/results/vision.json and updates its entries in bench/results/summary.json.
 Targets: detection p95 <= 5 mm; latency p99 <= one frame period + 10 ms; reach >= 95 %,
-grasp >= 85 % through vision; camera >= 10 Hz while the loop keeps /joint_states >= 100 Hz.
+grasp >= 85 % through vision; camera >= 10 Hz while the loop keeps /joint_states >= 100 Hz and
+its commands at >= 49 Hz (the policy node's own median period) with no hold on a stale joint
+state. ``--busy-cores N`` keeps N cores busy with bare loops at the default niceness (a loaded
+robot computer) and writes vision[...]_busy<N>.json.
 """
 import argparse
 import json
@@ -32,7 +35,7 @@ from benchlib import AT_LEAST, AT_MOST, RESULTS_DIR, latency_ms, machine_info, u
 from roslaunch_run import run_launch
 
 TARGETS = {"detection_p95_mm": 5.0, "latency_slack_ms": 10.0, "reach_success": 0.95, "grasp_success": 0.85,
-           "camera_hz": 10.0, "joint_states_hz": 100.0}
+           "camera_hz": 10.0, "joint_states_hz": 100.0, "command_hz": 49.0, "stale_joint_state_holds": 0}
 
 
 def camera_config(profile: str, rate: Optional[float] = None) -> Dict[str, Any]:
@@ -135,6 +138,7 @@ def closed_loop(model: str, task: str, episodes: int, seed: int, port: int, prof
     import rospy
     from geometry_msgs.msg import PoseStamped
     from sensor_msgs.msg import CameraInfo, JointState
+    from rosgraph_msgs.msg import Log
     from std_msgs.msg import Float64MultiArray, String
 
     lock = threading.Lock()
@@ -147,6 +151,9 @@ def closed_loop(model: str, task: str, episodes: int, seed: int, port: int, prof
         "detector_image_age_at_arrival", "detector_decode", "detector_detect", "detector_track", "detector_total",
         "target_age_at_arrival", "command_wait_after_target")}
     states: Dict[str, int] = {}
+    policy_holds: Dict[str, int] = {}  # the policy node's hold reasons, each time one begins (its log)
+    policy_periods: List[float] = []  # s between the policy node's commands, by its own clock (~timing)
+    joint_state_ages: List[float] = []  # s, the joint state's age when the policy used it (~timing)
     last_target_arrival = [0.0]
 
     def on_target(message: PoseStamped) -> None:
@@ -172,6 +179,16 @@ def closed_loop(model: str, task: str, episodes: int, seed: int, port: int, prof
         key = message.data.split(":")[0]
         states[key] = states.get(key, 0) + 1
 
+    def on_log(message: Log) -> None:
+        if message.name == "/fr5_policy" and "holding: " in message.msg:
+            reason = message.msg.split("holding: ", 1)[1].split(":")[0].split(" (")[0].strip()
+            policy_holds[reason] = policy_holds.get(reason, 0) + 1
+
+    def on_policy_timing(message: Float64MultiArray) -> None:
+        period, _inference, _compute, state_age = message.data
+        policy_periods.append(period)
+        joint_state_ages.append(state_age)
+
     def on_command(_message: Float64MultiArray) -> None:
         now = rospy.Time.now().to_sec()
         with lock:
@@ -189,6 +206,8 @@ def closed_loop(model: str, task: str, episodes: int, seed: int, port: int, prof
             rospy.Subscriber("/camera/timing", Float64MultiArray, on_camera_timing, queue_size=20),
             rospy.Subscriber("/detector/timing", Float64MultiArray, on_detector_timing, queue_size=20),
             rospy.Subscriber("/detector/track_state", String, on_state, queue_size=20),
+            rospy.Subscriber("/rosout_agg", Log, on_log, queue_size=100),
+            rospy.Subscriber("/fr5_policy/timing", Float64MultiArray, on_policy_timing, queue_size=100),
             rospy.Subscriber("/joint_states", JointState, lambda m: arrivals["joint_states"].append(time.monotonic()),
                              queue_size=50, tcp_nodelay=True),
             rospy.Subscriber("/target_pose", PoseStamped, on_target, queue_size=10, tcp_nodelay=True),
@@ -216,12 +235,19 @@ def closed_loop(model: str, task: str, episodes: int, seed: int, port: int, prof
               "detector_hold_warnings": refusals,
               "camera_rate": rate(arrivals["camera"]), "joint_states_rate": rate(arrivals["joint_states"]),
               "command_rate": rate(arrivals["command"]), "detection_rate": rate(arrivals["target"]),
+              "policy_holds": policy_holds,
+              "stale_joint_state_holds": sum(count for reason, count in policy_holds.items()
+                                             if reason.startswith("joint state stale")),
+              "policy_period": latency_ms(policy_periods[10:], digits=2),
+              "policy_joint_state_age": latency_ms(joint_state_ages[10:], digits=2),
               "latency_image_to_command": latency_ms(latencies, digits=2),
               "latency_breakdown": {name: latency_ms(values, digits=2) for name, values in stages.items() if values},
               "track_states": states}
     for name, figures in result["latency_breakdown"].items():
         print(f"  {name:32s} p50 {figures['p50_ms']:7.1f} ms  p99 {figures['p99_ms']:7.1f} ms")
     print(f"  detector track states: {states}")
+    print(f"  policy holds: {policy_holds}; period {result['policy_period']}, joint state age "
+          f"{result['policy_joint_state_age']}")
     print(f"{task} through vision: {successes}/{done}; camera {result['camera_rate']}, joint states "
           f"{result['joint_states_rate']}, commands {result['command_rate']}, latency "
           f"p50 {result['latency_image_to_command']['p50_ms']} ms p99 {result['latency_image_to_command']['p99_ms']} ms")
@@ -244,6 +270,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--camera-rate", type=float, help="the camera's frame rate (Hz) instead of the profile's; "
                                                           "results go to vision[_<profile>]_<rate>hz.json")
     parser.add_argument("--tasks", default="reach,grasp", help="closed-loop tasks to run")
+    parser.add_argument("--busy-cores", type=int, default=0, help="cores kept busy during the closed loops (0)")
     parser.add_argument("--loop", choices=["reach", "grasp"], help=argparse.SUPPRESS)
     parser.add_argument("--loop-out", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -263,16 +290,22 @@ def main(argv: Optional[List[str]] = None) -> int:
     camera_period_ms = 1000.0 / camera_hz_configured
     tasks = [task for task in ("reach", "grasp") if task in args.tasks.split(",")]
     args.results.mkdir(parents=True, exist_ok=True)
-    if not args.skip_ros:
-        # One process per run: a rospy node cannot move to the next launch's master.
-        for task, offset in ((task, ("reach", "grasp").index(task)) for task in tasks):
-            out = args.results / f".vision_{task}.json"
-            subprocess.run([sys.executable, __file__, "--loop", task, "--loop-out", str(out), "--episodes",
-                            str(args.episodes), "--seed", str(args.seed), "--port", str(args.port + offset),
-                            "--camera-profile", profile] + (["--camera-rate", str(rate)] if rate else []),
-                           check=True)
-            result[task] = json.loads(out.read_text())
-            out.unlink()
+    result["busy_cores"] = args.busy_cores
+    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy_cores)]
+    try:
+        if not args.skip_ros:
+            # One process per run: a rospy node cannot move to the next launch's master.
+            for task, offset in ((task, ("reach", "grasp").index(task)) for task in tasks):
+                out = args.results / f".vision_{task}.json"
+                subprocess.run([sys.executable, __file__, "--loop", task, "--loop-out", str(out), "--episodes",
+                                str(args.episodes), "--seed", str(args.seed), "--port", str(args.port + offset),
+                                "--camera-profile", profile] + (["--camera-rate", str(rate)] if rate else []),
+                               check=True)
+                result[task] = json.loads(out.read_text())
+                out.unlink()
+    finally:
+        for process in busy:
+            process.kill()
     verdicts = {"detection_p95_mm": verdict(result["offline"]["exact_depth"]["error_p95_mm"],
                                             TARGETS["detection_p95_mm"], AT_MOST, "mm", "detection error p95")}
     if not args.skip_ros and tasks:
@@ -289,11 +322,20 @@ def main(argv: Optional[List[str]] = None) -> int:
                                        "Hz", "/joint_states rate with the camera running"),
         })
         for task in tasks:
+            period_ms = result[task]["policy_period"]["p50_ms"]
+            verdicts[f"{task}_command_hz"] = verdict(round(1000.0 / period_ms, 2) if period_ms else None,
+                                                     TARGETS["command_hz"], AT_LEAST, "Hz",
+                                                     f"{task}: the policy node's command rate (median period)")
+            verdicts[f"{task}_stale_joint_state_holds"] = verdict(
+                result[task]["stale_joint_state_holds"], TARGETS["stale_joint_state_holds"], AT_MOST, "",
+                f"{task}: holds on a stale joint state")
+        for task in tasks:
             verdicts[f"{task}_success"] = verdict(result[task]["success_rate"], TARGETS[f"{task}_success"], AT_LEAST,
                                                   "", f"{task} success through vision")
     for v in verdicts.values():
         print(f"  {v['text']}")
-    name = "_".join(["vision"] + ([profile] if profile else []) + ([f"{rate:g}hz"] if rate else []))
+    name = "_".join(["vision"] + ([profile] if profile else []) + ([f"{rate:g}hz"] if rate else [])
+                    + ([f"busy{args.busy_cores}"] if args.busy_cores else []))
     path = write_result(args.results / f"{name}.json", result, verdicts,
                         machine)
     summary = update_summary(args.results, path.stem, path)

@@ -54,6 +54,7 @@ from ..sim.camera import RENDERERS, SimulatedCamera, depth_to_millimetres
 from ..transforms import load_transform_files, transform_in
 from .images import camera_info_message, image_message
 from .params import exit_if_help_asked, node_parameters
+from .scheduling import lower_priority
 from .static_transforms import to_messages
 
 
@@ -111,6 +112,7 @@ class CameraNodeParams:
     mount_config: str
     frames_config: str
     mount_offset: List[float]
+    nice: int
     joint_states_topic: str
     object_topic: str
     color_topic: str
@@ -152,6 +154,8 @@ class CameraNodeParams:
                               f"rad), got {self.mount_offset}")
         if self.rate <= 0 or not 0 < self.near < self.far or self.depth_noise < 0:
             raise ConfigError(f"{source}: needs rate > 0, 0 < near < far, depth_noise >= 0")
+        if not 0 <= self.nice <= 19:
+            raise ConfigError(f"{source}: 'nice' must be 0..19 (19: lowest priority), got {self.nice}")
         try:
             self.intrinsics()
         except IntrinsicsError as error:
@@ -163,6 +167,10 @@ class CameraNode:
 
     def __init__(self) -> None:
         self.params = params = node_parameters(CameraNodeParams, "camera")
+        # Before the renderer starts its threads (they inherit it): the camera stands in for
+        # hardware, so it must never take the CPU from the loop it feeds (the simulator's
+        # joint states, the policy's commands). When the CPU is short, frames come less often.
+        lower_priority(params.nice)
         self.intrinsics = params.intrinsics()
         spec = load_robot_spec()
         render_pose, camera_frames = params.transforms()

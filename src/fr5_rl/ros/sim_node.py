@@ -205,9 +205,10 @@ class SimulatorNode:
         self.holding = True  # between episodes: commands are ignored until the next one starts
         self.hold_until = 0.0
         self.settling = False  # the new scene is placed, the policy not yet told (~reset_settle_time)
-        # episode_start go_to_start: the policy node's start move runs (commands obeyed, the
-        # episode not yet timed) until its ~reset answers.
+        # Real time: the policy node's ~reset is in flight. With episode_start go_to_start its
+        # start move runs (commands obeyed, the episode not yet timed) until it answers.
         self.positioning = False
+        self.episode_starts = 0
 
         # ---- ROS interfaces
         self.joint_pub = rospy.Publisher(params.joint_states_topic, JointState, queue_size=10)
@@ -416,20 +417,23 @@ class SimulatorNode:
         """Obey commands from now on and tell the policy node a new episode starts."""
         self.holding, self.settling = False, False
         self.hold_until = 0.0
-        if self.params.episode_start == "go_to_start":
-            # The policy node answers once its start move is done: until then the loop runs the
-            # arm on its commands without timing an episode.
-            self.positioning = True
-            threading.Thread(target=self._reset_policy_then_start, daemon=True).start()
+        if self.reset_policy is None:
             return
-        if self.reset_policy is not None:
-            try:
-                self.reset_policy()
-            except (rospy.ServiceException, rospy.ROSException) as error:
-                # In lockstep a policy that keeps its old filter state breaks the match with gym.
-                log = rospy.logwarn_throttle if self.params.lockstep else rospy.logdebug_throttle
-                log(30.0, f"sim_node: could not reset the policy node through "
-                          f"{self.params.policy_reset_service}: {error}")
+        if not self.params.lockstep:
+            # A driver never stops publishing: the loop runs on while the policy node answers
+            # (with its motion guard it answers once the arm stands at the start, which it can
+            # only see in states the loop publishes). Until then its commands are obeyed but not
+            # timed with go_to_start, and not obeyed after a teleport (as if the call had blocked).
+            self.positioning = True
+            self.episode_starts += 1
+            threading.Thread(target=self._reset_policy_then_start, args=(self.episode_starts,), daemon=True).start()
+            return
+        try:
+            self.reset_policy()
+        except (rospy.ServiceException, rospy.ROSException) as error:
+            # In lockstep a policy that keeps its old filter state breaks the match with gym.
+            rospy.logwarn_throttle(30.0, f"sim_node: could not reset the policy node through "
+                                         f"{self.params.policy_reset_service}: {error}")
 
     def _follow_controller(self) -> None:
         """gripper_interface xmlrpc (lock held): the fingers take the width the emulated controller
@@ -442,21 +446,27 @@ class SimulatorNode:
         self.controller.set_measured_width(sum(states.positions[arm:]),
                                            moving=any(abs(speed) > 1e-3 for speed in states.velocities[arm:]))
 
-    def _reset_policy_then_start(self) -> None:
-        """episode_start go_to_start (a thread of its own): the policy node's ~reset, which
-        answers when the arm stands in the training start distribution; the episode starts with
-        the next command."""
+    def _reset_policy_then_start(self, start: int) -> None:
+        """Real time (a thread of its own): the policy node's ~reset, which answers at once, or
+        with its motion guard once the arm stands in the training start distribution; the
+        episode starts with the next command, unless another start (``episode_starts``) came
+        meanwhile."""
         try:
-            rospy.wait_for_service(self.params.policy_reset_service, timeout=120.0)  # at start-up
+            if self.params.episode_start == "go_to_start":  # at start-up the policy node may still come
+                rospy.wait_for_service(self.params.policy_reset_service, timeout=120.0)
             answer = self.reset_policy()
             ok, detail = answer.success, answer.message
         except (rospy.ServiceException, rospy.ROSException) as error:
             ok, detail = False, str(error)
         if not ok:
-            rospy.logwarn(f"sim_node: the policy node's start move did not end at the start: {detail}")
+            # After a teleport the guard may first see the last episode's end pose and refuse it;
+            # the next state, at home, starts it. Only a real start move that failed is news.
+            log = rospy.logwarn if self.params.episode_start == "go_to_start" else rospy.logdebug
+            log(f"sim_node: the policy node's reset did not end at the start: {detail}")
         with self.lock:
-            self.positioning = False
-            self.commanded = False  # timed from the policy's first command
+            if self.episode_starts == start:
+                self.positioning = False
+                self.commanded = False  # timed from the policy's first command
 
     def _finish_episode(self, verdict: EpisodeVerdict, sim_time: float) -> None:
         """Publish and log the outcome; in real time, hold the arm still for a moment."""
@@ -495,7 +505,10 @@ class SimulatorNode:
         if not np.array_equal(clamped, values):
             rospy.logwarn_throttle(1.0, "sim_node: arm command outside the joint limits was clamped")
         with self.lock:
-            if not self.holding:
+            # After a teleport (episode_start reset) the arm waits, as gym's reset leaves it,
+            # until the policy node has answered its ~reset.
+            teleported = self.positioning and self.params.episode_start == "reset"
+            if not self.holding and not teleported:
                 self.commanded = self.commanded or not self.positioning
                 if self.params.lockstep:
                     self.arm_command = tuple(clamped.tolist())
