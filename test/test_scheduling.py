@@ -1,4 +1,5 @@
 """fr5_rl.ros.scheduling: a node's niceness reaches every thread it has and will have."""
+import os
 import subprocess
 import sys
 import textwrap
@@ -33,7 +34,7 @@ CHILD = textwrap.dedent("""
 
 def run_child(nice: int, again: int) -> list:
     result = subprocess.run([sys.executable, "-c", CHILD], capture_output=True, text=True, check=True,
-                            env={**__import__("os").environ, "NICE": str(nice), "AGAIN": str(again)})
+                            env={**os.environ, "NICE": str(nice), "AGAIN": str(again)})
     return [line.split() for line in result.stdout.split("\n") if line]
 
 

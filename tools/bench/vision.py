@@ -151,7 +151,7 @@ def closed_loop(model: str, task: str, episodes: int, seed: int, port: int, prof
         "detector_image_age_at_arrival", "detector_decode", "detector_detect", "detector_track", "detector_total",
         "target_age_at_arrival", "command_wait_after_target")}
     states: Dict[str, int] = {}
-    policy_holds: Dict[str, int] = {}  # the policy node's hold reasons, each time one begins (its log)
+    policy_holds: Dict[str, int] = {}  # the policy node's logged holds by reason (at onset, then every 2 s)
     policy_periods: List[float] = []  # s between the policy node's commands, by its own clock (~timing)
     joint_state_ages: List[float] = []  # s, the joint state's age when the policy used it (~timing)
     last_target_arrival = [0.0]
