@@ -465,3 +465,38 @@ def test_a_model_from_before_the_hint_is_read_as_having_none():
                                                "joint_velocity_source": "measured"}
     saved = typed(ObservationConfig, saved_observation_settings(old), "meta.json")
     assert observation_size("reach", saved) == REACH_OBSERVATION_SIZE
+
+
+def test_tcp_position_and_axis_is_tcp_pose_to_the_bit():
+    """The env's noisy-observation path uses the float form; it must not change a single bit of
+    what tcp_pose (numpy) gives, or seeded rollouts would change with the speed-up."""
+    from fr5_rl.kinematics import ForwardKinematics
+
+    kinematics = ForwardKinematics(SPEC)
+    for q in np.random.default_rng(11).uniform(SPEC.lower_limits, SPEC.upper_limits, (50, 6)):
+        position, axis = kinematics.tcp_position_and_axis(q.tolist())
+        position_np, rotation_np = kinematics.tcp_pose(q)
+        assert position == position_np.tolist()
+        assert axis == rotation_np[:, 2].tolist()
+
+
+def test_joint_step_hint_solves_the_damped_least_squares_system():
+    """The hint's solve (numpy's kernel called directly) against the formula written out."""
+    from fr5_rl.env_config import JointStepHintConfig
+    from fr5_rl.kinematics import ForwardKinematics
+    from fr5_rl.observation import JointStepHint
+
+    settings = JointStepHintConfig(cartesian_step=0.015, rotation_step=0.05, damping=0.05, joint_step_scale=0.04)
+    hint, kinematics = JointStepHint(SPEC, settings), ForwardKinematics(SPEC)
+    rng = np.random.default_rng(12)
+    for q in rng.uniform(SPEC.lower_limits / 2, SPEC.upper_limits / 2, (20, 6)):
+        target = rng.uniform([-0.7, -0.4, 0.0], [-0.3, 0.4, 0.2])
+        position, axis, jacobian = kinematics.tcp_jacobian(q.tolist())
+        error = target - np.array(position)
+        error *= min(1.0, 0.015 / np.linalg.norm(error))
+        turn = np.array([-axis[1], axis[0]])
+        turn *= min(1.0, 0.05 / max(np.linalg.norm(turn), 1e-300))
+        wanted = np.concatenate([error, turn, [0.0]])
+        jacobian = np.array(jacobian)
+        step = jacobian.T @ np.linalg.inv(jacobian @ jacobian.T + 0.05 ** 2 * np.eye(6)) @ wanted / 0.04
+        np.testing.assert_allclose(hint(q.tolist(), target.tolist()), np.clip(step, -1.0, 1.0), atol=1e-9)

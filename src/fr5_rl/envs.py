@@ -468,7 +468,9 @@ class FR5Env(gym.Env):
         low, high = seconds_range
         if high <= 0.0:
             return 0
-        seconds = float(self.np_random.uniform(low, high))
+        # numpy's uniform(low, high) is low + (high - low) * random(): the same draw, the same
+        # bits, without its argument handling (two draws every step).
+        seconds = low + (high - low) * self.np_random.random()
         return min(int(round(seconds / self.world.physics_dt)), most)
 
     def _delayed(self, action: List[float]) -> List[float]:
@@ -535,11 +537,10 @@ class FR5Env(gym.Env):
             object_position = self._target.observe(object_position, now, in_hand)
         if self._obs_noise_std > 0.0:
             rng = self.np_random
-            q = np.asarray(q) + rng.normal(0.0, self._obs_noise_std, 6)
-            object_position = np.asarray(object_position) + rng.normal(0.0, self._obs_noise_std, 3)
+            q = (np.asarray(q) + rng.normal(0.0, self._obs_noise_std, 6)).tolist()
+            object_position = (np.asarray(object_position) + rng.normal(0.0, self._obs_noise_std, 3)).tolist()
             # The tcp pose follows the noisy joints, as FK of a noisy encoder reading would.
-            tcp_position, tcp_rotation = self.kinematics.tcp_pose(q)
-            tcp_axis = tcp_rotation[:, 2]
+            tcp_position, tcp_axis = self.kinematics.tcp_position_and_axis(q)
         if self._velocities_from_positions:
             velocities = self._estimate_velocities(q, sample_time)
         obs = self.observation_builder.build_from(

@@ -74,6 +74,17 @@ class ForwardKinematics:
         px, py, pz, *rotation = self._chain(joint_positions)
         return np.array((px, py, pz)), np.array(rotation).reshape(3, 3)
 
+    def tcp_position_and_axis(self, joint_positions: Sequence[float]) -> Tuple[List[float], List[float]]:
+        """The tcp's position (m) and approach axis (its z, unit) in base_link, as plain floats:
+        :meth:`tcp_pose` without numpy, for the observation's hot path (the same arithmetic, so
+        the same bits).
+
+        :param joint_positions: j1..j6 (rad).
+        """
+        px, py, pz, _, _, r02, _, _, r12, _, _, r22 = self._chain(joint_positions)
+        offset = self._tcp_offset
+        return [px + r02 * offset, py + r12 * offset, pz + r22 * offset], [r02, r12, r22]
+
     def tcp_jacobian(self, joint_positions: Sequence[float]) -> Tuple[List[float], List[float], List[List[float]]]:
         """The tcp's position (m), approach axis (its z, unit) and geometric Jacobian in base_link.
 
