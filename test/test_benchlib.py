@@ -334,3 +334,33 @@ def test_every_tool_with_a_command_line_starts(script):
                             cwd=str(REPO))
     assert result.returncode == 0, result.stderr[-2000:]
     assert "usage" in result.stdout.lower()
+
+
+# ----------------------------------------------------------------------------- the release to compare against
+def test_reference_tree_runs_that_commit_s_code_not_this_checkout(tmp_path, monkeypatch):
+    """The old-against-new benches (issue #30) run a commit's export; a child given
+    reference_environment imports fr5_rl and finds its config there, not here."""
+    import subprocess
+
+    import reference
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    tree = reference.reference_tree("HEAD")
+    assert tree.parent == tmp_path / "fr5_rl" / "reference"
+    assert (tree / "package.xml").is_file() and (tree / "src" / "fr5_rl" / "envs.py").is_file()
+    assert reference.reference_tree("HEAD") == tree  # exported once, reused
+    probe = "import fr5_rl, fr5_rl.config as c; print(fr5_rl.__file__); print(c.package_root())"
+    shown = subprocess.run([sys.executable, "-c", probe], env=reference.reference_environment(tree),
+                           capture_output=True, text=True, check=True).stdout.split()
+    assert Path(shown[0]).resolve().is_relative_to(tree.resolve())
+    assert Path(shown[1]).resolve() == tree.resolve()
+    assert str(REPO / "src") not in reference.reference_environment(tree)["PYTHONPATH"].split(os.pathsep)
+
+
+def test_an_unknown_release_says_what_to_do(tmp_path, monkeypatch):
+    import reference
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    with pytest.raises(reference.ReferenceUnavailable, match="--reference"):
+        reference.reference_tree("0" * 40)
+    assert len(reference.reference_release()) >= 7  # the file names a commit

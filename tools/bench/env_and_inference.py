@@ -27,6 +27,12 @@ warm-up steps are not), median of the repeats:
 - the floor: the replay plus the four simulator queries every step needs (joints, tcp link,
   object pose, contacts), their results unused.
 
+Against the previous release (``--reference REV``, default tools/bench/reference_release.yaml;
+``--no-reference`` skips it): tools/bench/env_probe.py runs the same random actions with resets
+under this checkout and under that commit's code (tools/bench/reference.py), alternately,
+``--repeats`` times each, in fresh processes; the ratio of the median steps/s (new / old) per
+task and variant.
+
 Inference latency of a model directory (default models/reach; skipped when absent): p50/p99
 of single-observation ``Policy.act`` calls through ``fr5_rl.deploy.policy.load_policy`` for the torch
 and onnx backends (the onnx graph is exported into a temporary copy when the directory has
@@ -447,6 +453,46 @@ def print_env_table(rows: List[Dict[str, Any]]) -> None:
           "world); median of repeats")
 
 
+def bench_against_release(revision: str, steps: int, repeats: int) -> Dict[str, Any]:
+    """Steps/s of this code and of ``revision``'s, by :mod:`env_probe`, alternating old and new
+    (which goes first alternates too) so that a machine getting slower or faster mid-run
+    touches both alike."""
+    import json
+    import subprocess
+
+    from reference import ReferenceUnavailable, reference_environment, reference_tree, resolve
+
+    try:
+        tree = reference_tree(revision)
+    except ReferenceUnavailable as error:
+        print(f"\nagainst the release: skipped, {error}")
+        return {"skipped": True, "reason": str(error)}
+    probe = str(Path(__file__).resolve().parent / "env_probe.py")
+    environments = {"new": None, "old": reference_environment(tree)}
+    rows = []
+    for task in ("reach", "grasp"):
+        for variant in ("plain", "randomised"):
+            measured: Dict[str, List[float]] = {"new": [], "old": []}
+            for repeat in range(repeats):
+                for which in (("new", "old") if repeat % 2 == 0 else ("old", "new")):
+                    output = subprocess.run(
+                        [sys.executable, probe, "--task", task, "--variant", variant, "--steps", str(steps),
+                         "--seed", str(repeat)], env=environments[which], capture_output=True, text=True, check=True)
+                    measured[which].append(json.loads(output.stdout.strip().splitlines()[-1])["steps_per_s"])
+            new, old = statistics.median(measured["new"]), statistics.median(measured["old"])
+            rows.append({"task": task, "variant": variant, "new_steps_per_s": round(new, 1),
+                         "old_steps_per_s": round(old, 1), "new_over_old": round(new / old, 3),
+                         "new_per_repeat": [round(v, 1) for v in measured["new"]],
+                         "old_per_repeat": [round(v, 1) for v in measured["old"]]})
+    print(f"\nagainst the release {revision} (commit {resolve(revision)[:12]}), median of {repeats} alternating "
+          f"runs of {steps} steps each, resets included:")
+    print(f"{'task':<7} {'variant':<11} {'new':>9} {'old':>9} {'new/old':>8}")
+    for r in rows:
+        print(f"{r['task']:<7} {r['variant']:<11} {r['new_steps_per_s']:>7.0f}/s {r['old_steps_per_s']:>7.0f}/s "
+              f"{r['new_over_old']:>7.2f}x")
+    return {"release": revision, "commit": resolve(revision), "steps": steps, "repeats": repeats, "rows": rows}
+
+
 def print_inference_table(result: Dict[str, Any]) -> None:
     if result.get("skipped"):
         print(f"inference latency: skipped ({result['reason']})")
@@ -472,6 +518,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--calls", type=int, default=None, help="inference calls per backend (default 5000)")
     parser.add_argument("--model", type=Path, default=None, help="model directory (default models/reach)")
     parser.add_argument("--skip-env", action="store_true")
+    parser.add_argument("--reference", default=None,
+                        help="the release to compare env speed against (default: tools/bench/reference_release.yaml)")
+    parser.add_argument("--no-reference", action="store_true", help="skip the comparison with the release")
     parser.add_argument("--skip-inference", action="store_true")
     parser.add_argument("--results", type=Path, default=RESULTS_DIR,
                         help="output directory (default bench/results); its summary.json is updated")
@@ -493,6 +542,11 @@ def main(argv: Optional[List[str]] = None) -> int:
         environments_randomised = {r["env_id"]: r for r in rows if r["variant"] == "randomised"}
         env_result = {"quick": args.quick, "machine": machine, "environments": environments,
                       "environments_randomised": environments_randomised}
+        if not args.no_reference:
+            from reference import reference_release
+
+            env_result["against_release"] = bench_against_release(args.reference or reference_release(), steps,
+                                                                  args.repeats)
         if hasattr(os, "getloadavg"):
             env_result["machine"] = dict(machine, load_average_1min_at_end=round(os.getloadavg()[0], 2))
         written.append(write_result(args.results / "env_speed.json", env_result, env_verdicts(environments)))

@@ -10,6 +10,12 @@ subprocess, one seed after the other) in a temporary run directory (reach stops 
 then writes bench/results/time_to_solve_<task>.json (every seed's evaluation history, the median
 and the worst, and how busy the machine's cores were while each run ran) and a learning-curve plot beside it, and updates summary.json.
 Targets: reach median <= 60 s, grasp <= 2 h.
+
+Against the previous release (issue #30; ``--no-reference`` skips it): the same command, the
+same seeds, run under that release's code (tools/bench/reference.py; the commit in
+tools/bench/reference_release.yaml, or ``--reference REV``), alternating with this code's runs;
+the result gets ``against_release`` (per seed, medians, new/old ratios) and two verdicts: the
+median time halved, the median steps grown by at most 10 %.
 """
 import argparse
 import json
@@ -59,6 +65,34 @@ def time_to_solve_verdicts(result: Dict[str, Any]) -> Dict[str, Dict[str, Any]]:
     return {"time_to_solve_s": verdict(result.get("time_to_solve_s"), result["target_s"], AT_MOST, "s", what)}
 
 
+def against_release(runs: List[Dict[str, Any]], release_runs: List[Dict[str, Any]], release: str) -> Dict[str, Any]:
+    """This code's runs against the release's on the same seeds: medians and their ratios
+    (an unsolved seed counts as infinitely slow, so its median may be None)."""
+    new_s = median_and_worst([r["time_to_solve_s"] for r in runs])[0]
+    old_s = median_and_worst([r["time_to_solve_s"] for r in release_runs])[0]
+    new_steps = median_and_worst([r["steps_or_samples_to_solve"] for r in runs])[0]
+    old_steps = median_and_worst([r["steps_or_samples_to_solve"] for r in release_runs])[0]
+    ratio = lambda a, b: round(a / b, 3) if a is not None and b else None  # noqa: E731
+    return {"release": release, "new_median_s": new_s, "old_median_s": old_s, "time_ratio": ratio(new_s, old_s),
+            "new_median_steps": new_steps, "old_median_steps": old_steps, "steps_ratio": ratio(new_steps, old_steps),
+            "per_seed": [{"seed": new["seed"], "new_s": new["time_to_solve_s"], "old_s": old["time_to_solve_s"],
+                          "new_steps": new["steps_or_samples_to_solve"], "old_steps": old["steps_or_samples_to_solve"],
+                          "new_cpu_utilisation": new["cpu"]["utilisation"],
+                          "old_cpu_utilisation": old["cpu"]["utilisation"]}
+                         for new, old in zip(runs, release_runs)],
+            "release_runs": release_runs}
+
+
+def release_verdicts(comparison: Dict[str, Any]) -> Dict[str, Dict[str, Any]]:
+    """Issue #30: the median time to solve halved against the release, steps grown by at most 10 %."""
+    return {
+        "time_halved": verdict(comparison["time_ratio"], 0.5, AT_MOST, "x",
+                               "median time to solve, this code / the release, same seeds, same run"),
+        "steps_within_10_percent": verdict(comparison["steps_ratio"], 1.1, AT_MOST, "x",
+                                           "median steps to solve, this code / the release"),
+    }
+
+
 def median_and_worst(times: List[Optional[float]]):
     """(median, worst) of the seeds' times to solve; an unsolved seed is infinitely slow."""
     ordered = sorted(float("inf") if t is None else t for t in times)
@@ -93,20 +127,31 @@ def plot_curves(runs: List[Dict[str, Any]], target: float, path: Path, title: st
     plt.close(figure)
 
 
-def run_seed(task: str, seed: int, target_rate: float, hyperparams: Optional[Path]) -> Dict[str, Any]:
-    """One training run from scratch; its time and steps to solve and its evaluation history."""
+def run_seed(task: str, seed: int, target_rate: float, hyperparams: Optional[Path],
+             tree: Optional[Path] = None) -> Dict[str, Any]:
+    """One training run from scratch; its time and steps to solve and its evaluation history.
+
+    :param tree: run that tree's code (the previous release, :mod:`reference`) instead of this
+        checkout's; its own config files, ``hyperparams`` aside.
+    """
     run_dir = Path(tempfile.mkdtemp(prefix=f"fr5_bench_{task}_{seed}_"))
+    root = tree or REPO
+    environment = None
+    if tree is not None:
+        from reference import reference_environment
+
+        environment = reference_environment(tree)
     if task == "reach":
-        command = [sys.executable, str(REPO / "scripts" / "train.py"), "--task", "reach", "--run-dir", str(run_dir),
+        command = [sys.executable, str(root / "scripts" / "train.py"), "--task", "reach", "--run-dir", str(run_dir),
                    "--seed", str(seed), "--stop-at-success", "--target-success", str(target_rate), "--no-progress",
                    *REACH_EVALUATION]
         if hyperparams is not None:
             command += ["--hyperparams", str(hyperparams)]
     else:
-        command = [sys.executable, str(REPO / "scripts" / "imitate.py"), "--task", "grasp", "--run-dir", str(run_dir),
+        command = [sys.executable, str(root / "scripts" / "imitate.py"), "--task", "grasp", "--run-dir", str(run_dir),
                    "--seed", str(seed)]
     start, machine_before = time.time(), machine_cpu_times()
-    subprocess.run(command, check=True, cwd=REPO)
+    subprocess.run(command, check=True, cwd=root, env=environment)
     wall = time.time() - start
     cpu = cpu_use(machine_before, machine_cpu_times())
     summary = json.loads((run_dir / "summary.json").read_text())
@@ -121,7 +166,7 @@ def run_seed(task: str, seed: int, target_rate: float, hyperparams: Optional[Pat
         solved_steps = solved[0]["timesteps"] if solved else None
     # The command as a reader would type it: no interpreter or temporary-directory paths.
     shown = [Path(c).name if i < 2 else ("RUN_DIR" if c == str(run_dir) else c) for i, c in enumerate(command)]
-    print(f"seed {seed}: solved in {solved_s} s, {solved_steps} steps; the {cpu['cores']} cores "
+    print(f"{'release' if tree is not None else 'this code'}, seed {seed}: solved in {solved_s} s, {solved_steps} steps; the {cpu['cores']} cores "
           f"{cpu['utilisation']:.0%} busy ({cpu['busy_s']} of {cpu['total_s']} core-seconds; run directory {run_dir})")
     return {"seed": seed, "command": " ".join(shown), "time_to_solve_s": solved_s,
             "steps_or_samples_to_solve": solved_steps, "wall_time_total_s": round(wall, 1), "cpu": cpu,
@@ -137,10 +182,30 @@ def main(argv: Optional[List[str]] = None) -> int:
                         help="reach: a hyperparameter YAML instead of config/ppo_reach.yaml")
     parser.add_argument("--results", type=Path, default=RESULTS_DIR,
                         help="output directory (default bench/results); its summary.json is updated")
+    parser.add_argument("--reference", default=None,
+                        help="also train the previous release's code on the same seeds, alternating with this code's "
+                             "(default release: tools/bench/reference_release.yaml)")
+    parser.add_argument("--no-reference", action="store_true", help="only this code")
     args = parser.parse_args(argv)
     target_s, target_rate = TARGETS[args.task]
     seeds = args.seeds or DEFAULT_SEEDS[args.task]
-    runs = [run_seed(args.task, seed, target_rate, args.hyperparams) for seed in seeds]
+    tree = None
+    if not args.no_reference:
+        from reference import ReferenceUnavailable, reference_release, reference_tree
+
+        try:
+            tree = reference_tree(args.reference or reference_release())
+        except ReferenceUnavailable as error:
+            print(f"against the release: skipped, {error}")
+    runs, release_runs = [], []
+    for index, seed in enumerate(seeds):
+        # Old and new alternate, and which goes first alternates: machine drift touches both.
+        order = ("new", "old") if index % 2 == 0 else ("old", "new")
+        for which in order:
+            if which == "new":
+                runs.append(run_seed(args.task, seed, target_rate, args.hyperparams))
+            elif tree is not None:
+                release_runs.append(run_seed(args.task, seed, target_rate, args.hyperparams, tree))
     median_s, worst_s = median_and_worst([run["time_to_solve_s"] for run in runs])
     steps = [run["steps_or_samples_to_solve"] for run in runs]
     result = {"task": args.task, "seeds": seeds, "target_success": target_rate, "target_s": target_s,
@@ -152,12 +217,24 @@ def main(argv: Optional[List[str]] = None) -> int:
               "runs": runs, "machine": runs[0]["machine"],
               "pass": median_s is not None and median_s <= target_s}
     verdicts = time_to_solve_verdicts(result)
+    if release_runs:
+        result["against_release"] = against_release(runs, release_runs, args.reference or reference_release())
+        verdicts.update(release_verdicts(result["against_release"]))
     path = write_result(args.results / f"time_to_solve_{args.task}.json", result, verdicts)
     plot = path.with_suffix(".png")
     plot_curves(runs, target_rate, plot, f"{args.task}: evaluation success, {len(seeds)} seeds")
     summary_path = update_summary(args.results, path.stem, path)
     print(f"time to solve {args.task} over seeds {seeds}: median {median_s} s, worst {worst_s} s to "
           f"{target_rate:.0%} (target {target_s:.0f} s): {verdicts['time_to_solve_s']['verdict']}")
+    if release_runs:
+        comparison = result["against_release"]
+        for row in comparison["per_seed"]:
+            print(f"seed {row['seed']}: this code {row['new_s']} s / {row['new_steps']} steps, the release "
+                  f"{row['old_s']} s / {row['old_steps']} steps")
+        print(f"against the release {comparison['release']}: median time {comparison['new_median_s']} s against "
+              f"{comparison['old_median_s']} s (new/old {comparison['time_ratio']}), median steps new/old "
+              f"{comparison['steps_ratio']}: {verdicts['time_halved']['verdict']}, "
+              f"{verdicts['steps_within_10_percent']['verdict']}")
     print(f"wrote {os.path.relpath(path)}, {os.path.relpath(plot)}, {os.path.relpath(summary_path)}")
     return 0
 
