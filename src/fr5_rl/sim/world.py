@@ -113,8 +113,11 @@ class PyBulletWorld:
         orientation = p.getQuaternionFromEuler([0.0, 0.0, yaw])
         p.resetBasePositionAndOrientation(self.object_id, position, orientation, physicsClientId=self.client)
         p.resetBaseVelocity(self.object_id, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
-        # An object resting on the table costs a third of each physics step; let it sleep until
-        # something touches it (contacts wake it up).
+        # A sleep request. It holds for the first physics step only: PyBullet (3.2.7) wakes the
+        # object on the second with the arm in the world, so resting on the table it costs about
+        # a third of every physics step (docs/benchmarks.md). Kept because every episode's
+        # physics since the shipped models depends on that first step; as a rigid body (maximal
+        # coordinates) the cup would sleep, but it tips differently.
         p.changeDynamics(self.object_id, -1, activationState=p.ACTIVATION_STATE_ENABLE_SLEEPING,
                          physicsClientId=self.client)
         p.changeDynamics(self.object_id, -1, activationState=p.ACTIVATION_STATE_SLEEP,
