@@ -149,3 +149,29 @@ def test_failure_penalty_is_paid_for_the_tasks_other_failures():
     plain = make("grasp")
     assert plain.task.failure_penalty == 0.0  # off unless configured
     plain.close()
+
+
+def test_grasp_point_height_moves_where_the_shaping_leads_the_tcp():
+    """grasp.grasp_point_height raises the point the approach term and the close cue measure to;
+    at 0 the terms are the object centre's, as before the key existed."""
+    from fr5_rl.env_config import load_env_config
+    from fr5_rl.tasks import GraspTask
+    from fr5_rl.tasks.base import TaskState
+
+    def state(tcp_z):
+        return TaskState(joint_positions=[0.0] * 6, joint_velocities=[0.0] * 6, tcp_position=(-0.5, 0.0, tcp_z),
+                         tcp_approach_axis=(0.0, 0.0, -1.0), gripper_width=0.08, tcp_to_object_distance=abs(tcp_z - 0.03),
+                         object_position=(-0.5, 0.0, 0.03), object_up_axis=(0.0, 0.0, 1.0),
+                         object_start_position=(-0.5, 0.0, 0.03), robot_table_contact=False, arm_object_contact=False,
+                         fingers_object_contact=0, tcp_in_workspace=True)
+
+    centre = GraspTask(load_env_config(), 0.08)
+    raised = GraspTask(load_env_config({"grasp": {"grasp_point_height": 0.015}}), 0.08)
+    at_centre, above = state(0.03), state(0.045)
+    assert centre.terms(at_centre)["approach"] == 0.0
+    assert raised.terms(above)["approach"] == pytest.approx(0.0, abs=1e-12)
+    assert raised.terms(at_centre)["approach"] == pytest.approx(-0.015 / centre.distance_scale)
+    # The cue to close: near the grasp point, not near the centre.
+    assert centre.terms(at_centre)["gripper"] == pytest.approx(-1.0)  # wants 0 width, has 0.08 open
+    assert raised.terms(above)["gripper"] == pytest.approx(-1.0)
+    assert raised.terms(state(0.0))["gripper"] == pytest.approx(0.0)  # 4.5 cm from the point: stay open

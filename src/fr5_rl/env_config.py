@@ -144,6 +144,7 @@ class GraspConfig:
     hold_time: float  # s
     knocked_over_angle_deg: float
     start_joint_noise: float  # rad
+    grasp_point_height: float = 0.0  # m above the object centre: where the shaping leads the tcp
 
 
 @dataclass(frozen=True)

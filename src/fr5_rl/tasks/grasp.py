@@ -1,6 +1,7 @@
 """FR5Grasp: reach, close the fingers on the object, lift it and hold it up."""
 from __future__ import annotations
 
+import math
 from typing import Dict
 
 import numpy as np
@@ -28,8 +29,9 @@ class GraspTask(Task):
         # Pushed more than 10 cm beyond the placement region: out of reach.
         self.region_low = [v - 0.1 for v in cfg.object.region_low]
         self.region_high = [v + 0.1 for v in cfg.object.region_high]
-        # Close when the tcp is this close to the object centre (m): the shaping's cue.
+        # Close when the tcp is this close to the grasp point (m): the shaping's cue.
         self.close_distance = 0.02
+        self.grasp_point_height = grasp.grasp_point_height
         self.lifted_time = 0.0
 
     def reset(self) -> None:
@@ -40,12 +42,21 @@ class GraspTask(Task):
         """Height (m) of the object centre above where it was placed."""
         return state.object_position[2] - state.object_start_position[2]
 
+    def grasp_point_distance(self, state: TaskState) -> float:
+        """Distance (m) from the tcp to the grasp point, ``grasp_point_height`` above the object
+        centre (the centre itself at 0)."""
+        if not self.grasp_point_height:
+            return state.tcp_to_object_distance
+        (tcp_x, tcp_y, tcp_z), (object_x, object_y, object_z) = state.tcp_position, state.object_position
+        return math.dist((tcp_x, tcp_y, tcp_z), (object_x, object_y, object_z + self.grasp_point_height))
+
     def terms(self, state: TaskState) -> Dict[str, float]:
-        near = state.tcp_to_object_distance < self.close_distance
+        distance = self.grasp_point_distance(state)
+        near = distance < self.close_distance
         wanted_width = 0.0 if near else self.max_opening_width
         held = state.fingers_object_contact == 2
         return {
-            "approach": self.approach_term(state),
+            "approach": -distance / self.distance_scale,
             "orientation": self.orientation_term(state),
             "gripper": self.gripper_term(state, wanted_width),
             "lift": min(max(self.lift(state), 0.0) / self.lift_height, 1.0) if held else 0.0,
