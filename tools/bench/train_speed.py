@@ -78,8 +78,8 @@ def main(argv: Optional[List[str]] = None) -> int:
             runs[which].append(run)
             print(f"{'this code' if which == 'new' else 'the release'}: {run['wall_s']} s for {args.timesteps} steps "
                   f"({run['steps_per_s']:.0f}/s), cores {run['cpu']['utilisation']:.0%} busy, weights {run['policy_hash']}")
-    new_s = statistics.median(r["wall_s"] for r in runs["new"])
-    old_s = statistics.median(r["wall_s"] for r in runs["old"])
+    new_s = round(statistics.median(r["wall_s"] for r in runs["new"]), 2)
+    old_s = round(statistics.median(r["wall_s"] for r in runs["old"]), 2)
     hashes = {r["policy_hash"] for r in runs["new"] + runs["old"]}
     result = {"task": args.task, "seed": args.seed, "timesteps": args.timesteps, "release": revision,
               "commit": resolve(revision), "new_median_s": new_s, "old_median_s": old_s,
