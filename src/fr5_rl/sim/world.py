@@ -113,11 +113,11 @@ class PyBulletWorld:
         orientation = p.getQuaternionFromEuler([0.0, 0.0, yaw])
         p.resetBasePositionAndOrientation(self.object_id, position, orientation, physicsClientId=self.client)
         p.resetBaseVelocity(self.object_id, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
-        # A sleep request. It holds for the first physics step only: PyBullet (3.2.7) wakes the
-        # object on the second with the arm in the world, so resting on the table it costs about
-        # a third of every physics step (docs/benchmarks.md). Kept because every episode's
-        # physics since the shipped models depends on that first step; as a rigid body (maximal
-        # coordinates) the cup would sleep, but it tips differently.
+        # A sleep request that PyBullet (3.2.7) does not keep: the one-link multibody moves on
+        # the first physics step, and resting on the table it costs about a third of every
+        # physics step (docs/benchmarks.md). The calls still change each episode's physics a
+        # little (seeded rollouts differ without them), and every figure of the shipped models
+        # was measured with them, so they stay.
         p.changeDynamics(self.object_id, -1, activationState=p.ACTIVATION_STATE_ENABLE_SLEEPING,
                          physicsClientId=self.client)
         p.changeDynamics(self.object_id, -1, activationState=p.ACTIVATION_STATE_SLEEP,
