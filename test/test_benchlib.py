@@ -357,6 +357,13 @@ def test_reference_tree_runs_that_commit_s_code_not_this_checkout(tmp_path, monk
     assert str(REPO / "src") not in reference.reference_environment(tree)["PYTHONPATH"].split(os.pathsep)
 
 
+def test_old_and_new_alternate_and_so_does_which_goes_first():
+    import reference
+
+    orders = [reference.alternating(index) for index in range(4)]
+    assert orders == [("new", "old"), ("old", "new"), ("new", "old"), ("old", "new")]
+
+
 def test_an_unknown_release_says_what_to_do(tmp_path, monkeypatch):
     import reference
 

@@ -460,10 +460,10 @@ def bench_against_release(revision: str, steps: int, repeats: int) -> Dict[str, 
     import json
     import subprocess
 
-    from reference import ReferenceUnavailable, reference_environment, reference_tree, resolve
+    from reference import ReferenceUnavailable, alternating, reference_environment, reference_tree, resolve
 
     try:
-        tree = reference_tree(revision)
+        tree, commit = reference_tree(revision), resolve(revision)
     except ReferenceUnavailable as error:
         print(f"\nagainst the release: skipped, {error}")
         return {"skipped": True, "reason": str(error)}
@@ -474,7 +474,7 @@ def bench_against_release(revision: str, steps: int, repeats: int) -> Dict[str, 
         for variant in ("plain", "randomised"):
             measured: Dict[str, List[float]] = {"new": [], "old": []}
             for repeat in range(repeats):
-                for which in (("new", "old") if repeat % 2 == 0 else ("old", "new")):
+                for which in alternating(repeat):
                     output = subprocess.run(
                         [sys.executable, probe, "--task", task, "--variant", variant, "--steps", str(steps),
                          "--seed", str(repeat)], env=environments[which], capture_output=True, text=True, check=True)
@@ -484,13 +484,13 @@ def bench_against_release(revision: str, steps: int, repeats: int) -> Dict[str, 
                          "old_steps_per_s": round(old, 1), "new_over_old": round(new / old, 3),
                          "new_per_repeat": [round(v, 1) for v in measured["new"]],
                          "old_per_repeat": [round(v, 1) for v in measured["old"]]})
-    print(f"\nagainst the release {revision} (commit {resolve(revision)[:12]}), median of {repeats} alternating "
+    print(f"\nagainst the release {revision} (commit {commit[:12]}), median of {repeats} alternating "
           f"runs of {steps} steps each, resets included:")
     print(f"{'task':<7} {'variant':<11} {'new':>9} {'old':>9} {'new/old':>8}")
     for r in rows:
         print(f"{r['task']:<7} {r['variant']:<11} {r['new_steps_per_s']:>7.0f}/s {r['old_steps_per_s']:>7.0f}/s "
               f"{r['new_over_old']:>7.2f}x")
-    return {"release": revision, "commit": resolve(revision), "steps": steps, "repeats": repeats, "rows": rows}
+    return {"release": revision, "commit": commit, "steps": steps, "repeats": repeats, "rows": rows}
 
 
 def print_inference_table(result: Dict[str, Any]) -> None:

@@ -20,7 +20,7 @@ import subprocess
 import tarfile
 import tempfile
 from pathlib import Path
-from typing import Dict, Optional
+from typing import Dict, Optional, Tuple
 
 import yaml
 
@@ -101,3 +101,10 @@ def reference_environment(tree: Path, base: Optional[Dict[str, str]] = None) -> 
     env["PYTHONPATH"] = os.pathsep.join([str(tree / "src"), *others])
     env["FR5_RL_ROOT"] = str(tree)
     return env
+
+
+def alternating(index: int) -> Tuple[str, str]:
+    """The order of run ``index``'s pair: ``("new", "old")``, then ``("old", "new")``, and so on.
+    Alternating which code goes first, as well as alternating the codes, lets a machine that
+    speeds up or slows down mid-run touch both alike."""
+    return ("new", "old") if index % 2 == 0 else ("old", "new")

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 from benchlib import AT_MOST, REPO, RESULTS_DIR, update_summary, verdict, write_result
+from reference import ReferenceUnavailable, alternating, reference_environment, reference_release, reference_tree
 
 # task -> (seconds allowed, evaluation success that counts as solved)
 TARGETS = {"reach": (60, 0.95), "grasp": (2 * 3600, 0.90)}
@@ -136,11 +137,7 @@ def run_seed(task: str, seed: int, target_rate: float, hyperparams: Optional[Pat
     """
     run_dir = Path(tempfile.mkdtemp(prefix=f"fr5_bench_{task}_{seed}_"))
     root = tree or REPO
-    environment = None
-    if tree is not None:
-        from reference import reference_environment
-
-        environment = reference_environment(tree)
+    environment = None if tree is None else reference_environment(tree)
     if task == "reach":
         command = [sys.executable, str(root / "scripts" / "train.py"), "--task", "reach", "--run-dir", str(run_dir),
                    "--seed", str(seed), "--stop-at-success", "--target-success", str(target_rate), "--no-progress",
@@ -191,17 +188,13 @@ def main(argv: Optional[List[str]] = None) -> int:
     seeds = args.seeds or DEFAULT_SEEDS[args.task]
     tree = None
     if not args.no_reference:
-        from reference import ReferenceUnavailable, reference_release, reference_tree
-
         try:
             tree = reference_tree(args.reference or reference_release())
         except ReferenceUnavailable as error:
             print(f"against the release: skipped, {error}")
     runs, release_runs = [], []
     for index, seed in enumerate(seeds):
-        # Old and new alternate, and which goes first alternates: machine drift touches both.
-        order = ("new", "old") if index % 2 == 0 else ("old", "new")
-        for which in order:
+        for which in alternating(index):
             if which == "new":
                 runs.append(run_seed(args.task, seed, target_rate, args.hyperparams))
             elif tree is not None:

@@ -29,7 +29,8 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 from benchlib import AT_MOST, REPO, RESULTS_DIR, update_summary, verdict, write_result
-from reference import ReferenceUnavailable, reference_environment, reference_release, reference_tree, resolve
+from reference import (ReferenceUnavailable, alternating, reference_environment, reference_release, reference_tree,
+                       resolve)
 from time_to_solve import cpu_use, machine_cpu_times
 
 
@@ -72,7 +73,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         return 2
     runs: Dict[str, List[Dict[str, Any]]] = {"new": [], "old": []}
     for repeat in range(args.repeats):
-        for which in (("new", "old") if repeat % 2 == 0 else ("old", "new")):
+        for which in alternating(repeat):
             root, environment = (REPO, None) if which == "new" else (tree, reference_environment(tree))
             run = run_once(root, environment, args.task, args.seed, args.timesteps)
             runs[which].append(run)
