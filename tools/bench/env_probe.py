@@ -22,6 +22,8 @@ import time
 import numpy as np
 import yaml
 
+# env_and_inference.RANDOMISED_FROM by task name. Not imported from there: its benchlib puts this
+# checkout's src first on the path, and the probe must import the release's fr5_rl.
 RANDOMISED_FROM = {"reach": "ppo_reach", "grasp": "ppo_grasp_chain"}
 
 
