@@ -81,7 +81,29 @@ def test_gated_evaluation_skips_until_training_episodes_succeed(tmp_path):
     assert len(histories["0"][0]) == 4 and histories["0"][1] == 0
 
 
-@pytest.mark.parametrize("option", [["--eval-min-training-success", "1.5"], ["--eval-min-training-success", "-0.1"]])
+def test_evaluation_spread_over_processes_evaluates_the_same_episodes(tmp_path):
+    """The evaluation's environments step on every core like the training ones; how many
+    processes step them changes nothing: each environment is seeded by its rank, and each
+    evaluation runs ``--eval-episodes`` episodes spread over ``--eval-envs`` of them."""
+    import numpy as np
+
+    evaluations = {}
+    for processes in ("1", "2"):
+        run_dir = tmp_path / f"processes_{processes}"
+        code = train.main(["--timesteps", "1024", "--n-envs", "2", "--processes", processes, "--eval-freq", "512",
+                           "--eval-episodes", "3", "--eval-envs", "2", "--no-progress", "--run-dir", str(run_dir),
+                           "--hyperparams", str(write(tmp_path / "ppo_fast.yaml", FAST_PPO))])
+        assert code == 0
+        with np.load(run_dir / "eval" / "evaluations.npz") as saved:
+            evaluations[processes] = (saved["results"], saved["ep_lengths"])
+    results, lengths = evaluations["1"]
+    assert lengths.shape == (2, 3)  # two evaluations of three episodes
+    assert np.array_equal(results, evaluations["2"][0]) and np.array_equal(lengths, evaluations["2"][1])
+    assert read_json(tmp_path / "processes_2" / "config.json")["eval_envs"] == 2  # a resume keeps it
+
+
+@pytest.mark.parametrize("option", [["--eval-min-training-success", "1.5"], ["--eval-min-training-success", "-0.1"],
+                                    ["--eval-envs", "0"]])
 def test_evaluation_options_are_checked(option, tmp_path, capsys):
     code = train.main(["--timesteps", "1000", "--no-progress", "--run-dir", str(tmp_path / "run"), *option])
     assert code == 2

@@ -40,6 +40,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--checkpoint-freq", type=int, default=20_000, help="steps between checkpoints (20000)")
     parser.add_argument("--eval-freq", type=int, default=20_000, help="steps between evaluations (20000)")
     parser.add_argument("--eval-episodes", type=int, default=40, help="episodes per evaluation (40)")
+    parser.add_argument("--eval-envs", type=int, default=8, metavar="N",
+                        help="environments the evaluation episodes are spread over, stepped on the same cores as "
+                             "training (8; a fixed number, so that any machine evaluates the same episodes)")
     parser.add_argument("--target-success", type=float, default=0.95,
                         help="evaluation success rate that counts as solved, for time to solve (0.95)")
     parser.add_argument("--stop-at-success", action="store_true", help="stop once solved")
@@ -76,6 +79,7 @@ def train_run(args: argparse.Namespace) -> TrainRun:
     return TrainRun(task=args.task, algo=args.algo, hyperparams=args.hyperparams, n_envs=args.n_envs, seed=args.seed,
                     timesteps=args.timesteps, run_dir=args.run_dir, resume=args.resume, init_from=args.init_from,
                     checkpoint_freq=args.checkpoint_freq, eval_freq=args.eval_freq, eval_episodes=args.eval_episodes,
+                    eval_envs=args.eval_envs,
                     target_success=args.target_success, stop_at_success=args.stop_at_success,
                     eval_min_training_success=args.eval_min_training_success, subprocess=not args.no_subprocess,
                     processes=args.processes, progress=not args.no_progress, torch_threads=args.torch_threads,

@@ -25,8 +25,8 @@ CONFIG_FILE = "config.json"  # in the run directory: what --resume continues
 FIXED_ON_RESUME = ("task", "algo", "seed", "n_envs", "timesteps")
 #: How a run is watched and stepped: a resumed run takes these from its ``config.json`` unless
 #: they were given again (the field names of :class:`TrainRun`).
-KEPT_ON_RESUME = ("checkpoint_freq", "eval_freq", "eval_episodes", "subprocess", "target_success",
-                  "eval_min_training_success")
+KEPT_ON_RESUME = ("checkpoint_freq", "eval_freq", "eval_episodes", "eval_envs", "subprocess",
+                  "target_success", "eval_min_training_success")
 
 
 @dataclass(frozen=True)
@@ -53,6 +53,11 @@ class TrainRun:
     :param eval_freq: environment steps between evaluations (rounded down to whole vector steps
         of ``n_envs`` environments, at least one).
     :param eval_episodes: episodes per evaluation.
+    :param eval_envs: environments the evaluation's episodes are spread over (SB3's
+        ``evaluate_policy`` gives environment ``i`` ``(eval_episodes + i) // eval_envs`` of
+        them), stepped like the training ones on ``processes`` cores; capped at
+        ``eval_episodes``. A fixed number, not one per core, so that a run evaluates the same
+        episodes on any machine.
     :param target_success: evaluation success rate (0..1) that counts as solved, for the time to solve.
     :param stop_at_success: stop training once ``target_success`` is reached.
     :param eval_min_training_success: skip an evaluation while the training episodes since the
@@ -82,6 +87,7 @@ class TrainRun:
     checkpoint_freq: int = 20_000
     eval_freq: int = 20_000
     eval_episodes: int = 40
+    eval_envs: int = 8
     target_success: float = 0.95
     stop_at_success: bool = False
     eval_min_training_success: float = 0.0
@@ -95,10 +101,13 @@ class TrainRun:
     def check(self) -> None:
         """Refuse values no run can use.
 
-        :raises ConfigError: ``processes`` below 1, ``eval_min_training_success`` outside [0, 1].
+        :raises ConfigError: ``processes`` or ``eval_envs`` below 1, ``eval_min_training_success``
+            outside [0, 1].
         """
         if self.processes is not None and self.processes < 1:
             raise ConfigError(f"--processes must be at least 1, got {self.processes}")
+        if self.eval_envs < 1:
+            raise ConfigError(f"--eval-envs must be at least 1, got {self.eval_envs}")
         if not 0.0 <= float(self.eval_min_training_success) <= 1.0:
             raise ConfigError(f"--eval-min-training-success must be in [0, 1], got {self.eval_min_training_success}")
 
@@ -132,7 +141,8 @@ class TrainRun:
         return {"task": self.task, "algo": self.algo, "seed": self.seed, "n_envs": self.n_envs,
                 "timesteps": self.timesteps, "hyperparams_resolved": dict(hyperparams_resolved),
                 "checkpoint_freq": self.checkpoint_freq, "eval_freq": self.eval_freq,
-                "eval_episodes": self.eval_episodes, "no_subprocess": not self.subprocess,
+                "eval_episodes": self.eval_episodes, "eval_envs": self.eval_envs,
+                "no_subprocess": not self.subprocess,
                 "target_success": self.target_success,
                 "eval_min_training_success": float(self.eval_min_training_success),
                 # a record only: the profile's randomisation is in hyperparams_resolved, which a resume reads

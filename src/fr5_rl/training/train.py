@@ -24,7 +24,6 @@ from ..deploy.bundle import (MODEL_FILE, STATS_FILE, ModelFilesError, algorithm_
                               check_files_present, check_sb3_zip, damaged, machine_description, read_meta,
                               recover_model_dir, save_model_dir, write_json_atomic)
 from .algorithms import check_hyperparameters, hyperparameter_source, load_hyperparameters
-from .callbacks import REPLAY_FILE, save_checkpoint
 from .hyperparameters import ExpertStartSettings, Hyperparameters
 from .run_settings import FIXED_ON_RESUME, TrainRun, read_run_config
 
@@ -314,10 +313,16 @@ def train(run: TrainRun, t_start: Optional[float] = None,
         to Ray Tune, see :mod:`fr5_rl.training.tune.trial`).
     :raises ConfigError: a configuration problem, before any training time is spent.
     """
+    t_start = time.time() if t_start is None else t_start
+    if run.subprocess and run.start_method == "forkserver" and (run.processes or available_cores()) > 1:
+        from .fork_server import start_fork_server
+
+        start_fork_server()  # before torch: the workers' imports happen meanwhile, on another core
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
-    t_start = time.time() if t_start is None else t_start
+    from .callbacks import REPLAY_FILE, save_checkpoint
+
     torch.set_num_threads(max(run.torch_threads, 1))
     # torch.distributions checks every distribution's parameters when it is built: a policy call
     # per step and every minibatch of the update build one. The checks compute nothing the
@@ -358,7 +363,11 @@ def train(run: TrainRun, t_start: Optional[float] = None,
 
     venv = make_vec_env(run.task, env_overrides, run.n_envs, run.seed, run_dir / "monitor", run.subprocess,
                         run.start_method, run.processes, hyper.expert_start)
-    eval_env = make_vec_env(run.task, env_overrides, 1, run.seed + EVAL_SEED_OFFSET, None, False)
+    # The evaluation's episodes run on every core too (its workers wait, idle, while training
+    # steps), with one policy call per step for all of them: 40 episodes one after the other
+    # in this process were a seventh of a reach run.
+    eval_env = make_vec_env(run.task, env_overrides, min(run.eval_envs, run.eval_episodes),
+                            run.seed + EVAL_SEED_OFFSET, None, run.subprocess, run.start_method, run.processes)
     algo_cls = algorithm_class(run.algo)
     latest = run_dir / "checkpoints" / "latest"
     summary_path = run_dir / "summary.json"
@@ -419,7 +428,7 @@ def train(run: TrainRun, t_start: Optional[float] = None,
                     "finished": not interrupted})
     write_json_atomic(summary_path, summary)
     close_vec_env(venv, interrupted)
-    eval_env.close()
+    close_vec_env(eval_env, interrupted)
     print(f"train.py: {'stopped' if interrupted else 'done'} at {model.num_timesteps} steps; "
           f"run directory {run_dir}")
     return 130 if interrupted else 0
