@@ -535,17 +535,25 @@ class FR5Env(gym.Env):
             in_hand = (state.gripper_width <= 2.0 * self._object_dims[0] + 0.01
                        and state.tcp_to_object_distance <= 0.04 and state.object_position[2] > self._object_rest_z + 0.005)
             object_position = self._target.observe(object_position, now, in_hand)
+        tcp_jacobian = None
         if self._obs_noise_std > 0.0:
             rng = self.np_random
             q = (np.asarray(q) + rng.normal(0.0, self._obs_noise_std, 6)).tolist()
             object_position = (np.asarray(object_position) + rng.normal(0.0, self._obs_noise_std, 3)).tolist()
-            # The tcp pose follows the noisy joints, as FK of a noisy encoder reading would.
-            tcp_position, tcp_axis = self.kinematics.tcp_position_and_axis(q)
+            # The tcp pose follows the noisy joints, as FK of a noisy encoder reading would. The
+            # joint-step hint needs the same chain of the same joints: computed once for both
+            # (the same arithmetic, so the same bits).
+            if self.observation_builder.joint_step_hint is not None:
+                tcp_jacobian = self.kinematics.tcp_jacobian(q)
+                tcp_position, tcp_axis = tcp_jacobian[0], tcp_jacobian[1]
+            else:
+                tcp_position, tcp_axis = self.kinematics.tcp_position_and_axis(q)
         if self._velocities_from_positions:
             velocities = self._estimate_velocities(q, sample_time)
         obs = self.observation_builder.build_from(
             q, velocities, width, self._sent_gripper_width, tcp_position, tcp_axis,
             object_position, object_position[2] - self._object_rest_z, self._action_history.values(),
+            tcp_jacobian=tcp_jacobian,
         )
         return state, obs
 

@@ -45,7 +45,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from collections import deque
-from typing import Any, Dict, List, Mapping, Optional, Sequence
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -117,13 +117,19 @@ class JointStepHint:
         self._damping = settings.damping ** 2 * np.eye(6)
         self._gain = 1.0 / settings.joint_step_scale
 
-    def __call__(self, joint_positions: Sequence[float], object_position: Sequence[float]) -> List[float]:
+    def __call__(self, joint_positions: Sequence[float], object_position: Sequence[float],
+                 tcp_jacobian: Optional[Tuple[List[float], List[float], List[List[float]]]] = None) -> List[float]:
         """Six values in [-1, 1]: the hinted step of j1..j6 / ``joint_step_scale``.
 
         :param joint_positions: j1..j6 (rad), finite.
         :param object_position: object centre (m, base_link), finite.
+        :param tcp_jacobian: :meth:`ForwardKinematics.tcp_jacobian` of ``joint_positions``, where
+            the caller has it already (the noisy observation's tcp pose needs the same chain);
+            None: computed here.
         """
-        (tcp_x, tcp_y, tcp_z), (axis_x, axis_y, axis_z), jacobian = self._kinematics.tcp_jacobian(joint_positions)
+        if tcp_jacobian is None:
+            tcp_jacobian = self._kinematics.tcp_jacobian(joint_positions)
+        (tcp_x, tcp_y, tcp_z), (axis_x, axis_y, axis_z), jacobian = tcp_jacobian
         object_x, object_y, object_z = object_position
         dx, dy, dz = object_x - tcp_x, object_y - tcp_y, object_z - tcp_z
         distance = math.sqrt(dx * dx + dy * dy + dz * dz)
@@ -255,8 +261,12 @@ class ObservationBuilder:
                    gripper_width: float, gripper_command_width: float, tcp_position: Sequence[float],
                    tcp_approach_axis: Sequence[float], object_position: Sequence[float],
                    object_lift: float = 0.0, previous_actions: Sequence[float] = (),
-                   out: Optional[np.ndarray] = None) -> np.ndarray:
+                   out: Optional[np.ndarray] = None,
+                   tcp_jacobian: Optional[Tuple[List[float], List[float], List[List[float]]]] = None) -> np.ndarray:
         """The observation from the fields of :class:`ObservationInputs`, given as arguments.
+
+        ``tcp_jacobian``: the joint-step hint's kinematics of ``joint_positions``
+        (:meth:`ForwardKinematics.tcp_jacobian`) where the caller computed them already.
 
         Raises ValueError on NaN or inf, on something that is not a number, or on a sequence
         of the wrong length. Finite values outside their range are clipped to [-1, 1].
@@ -289,7 +299,7 @@ class ObservationBuilder:
                 if history:
                     values.extend(1.0 if value > 1.0 else (-1.0 if value < -1.0 else value) for value in history)
                 if self.joint_step_hint is not None:
-                    values.extend(self.joint_step_hint(joint_positions, object_position))
+                    values.extend(self.joint_step_hint(joint_positions, object_position, tcp_jacobian))
         except (TypeError, ValueError) as error:  # strings, None, arrays where numbers belong
             raise ValueError(f"observation inputs must be numbers and sequences of numbers: {error}") from None
         if not finite:
