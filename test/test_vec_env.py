@@ -118,3 +118,34 @@ def test_processes_below_one_refused_before_any_run_directory(tmp_path, capsys):
     assert train.main(["--processes", "0", "--timesteps", "100", "--run-dir", str(run_dir), "--no-progress"]) == 2
     assert "--processes must be at least 1" in capsys.readouterr().err
     assert not run_dir.exists()
+
+
+FORK_SERVER_SCRIPT = """
+import multiprocessing, sys
+from fr5_rl.training.fork_server import start_fork_server
+
+def report(queue):
+    queue.put(("wave" in sys.modules, "zipapp" in sys.modules))
+
+if __name__ == "__main__":
+    start_fork_server(["wave"])
+    context = multiprocessing.get_context("forkserver")
+    queue = context.Queue()
+    worker = context.Process(target=report, args=(queue,))
+    worker.start()
+    print(queue.get(timeout=60))
+    worker.join()
+"""
+
+
+def test_fork_server_workers_start_with_its_modules_imported(tmp_path):
+    """A worker forked from the server started by start_fork_server finds the named modules
+    imported (done once, in the server), and no others of the kind."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "fork_server_check.py"
+    script.write_text(FORK_SERVER_SCRIPT)
+    result = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "(True, False)"
