@@ -31,7 +31,8 @@ def ppo_run(tmp_path_factory) -> Path:
     run_dir = tmp_path_factory.mktemp("ppo") / "run"
     from fr5_rl.cli import train
 
-    code = train.main(["--timesteps", "3000", "--n-envs", "2", "--no-subprocess", "--checkpoint-freq", "1000",
+    # 4 environments: the default config's 64 steps each make one batch of 256
+    code = train.main(["--timesteps", "3000", "--n-envs", "4", "--no-subprocess", "--checkpoint-freq", "1000",
                        "--eval-freq", "1000", "--eval-episodes", "2", "--no-progress", "--run-dir", str(run_dir)])
     assert code == 0
     return run_dir

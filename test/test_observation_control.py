@@ -500,3 +500,21 @@ def test_joint_step_hint_solves_the_damped_least_squares_system():
         jacobian = np.array(jacobian)
         step = jacobian.T @ np.linalg.inv(jacobian @ jacobian.T + 0.05 ** 2 * np.eye(6)) @ wanted / 0.04
         np.testing.assert_allclose(hint(q.tolist(), target.tolist()), np.clip(step, -1.0, 1.0), atol=1e-9)
+
+
+def test_one_kinematic_chain_serves_the_noisy_tcp_pose_and_the_hint_bit_for_bit():
+    """The environment computes tcp_jacobian once for a noisy observation and hands it to the
+    hint: its tcp pose must equal tcp_position_and_axis's to the bit, and the hint given the
+    chain must equal the hint computing it."""
+    from fr5_rl.env_config import JointStepHintConfig
+    from fr5_rl.kinematics import ForwardKinematics
+    from fr5_rl.observation import JointStepHint
+
+    settings = JointStepHintConfig(cartesian_step=0.015, rotation_step=0.05, damping=0.05, joint_step_scale=0.04)
+    hint, kinematics = JointStepHint(SPEC, settings), ForwardKinematics(SPEC)
+    rng = np.random.default_rng(21)
+    for q in rng.uniform(SPEC.lower_limits, SPEC.upper_limits, (50, 6)).tolist():
+        target = rng.uniform([-0.7, -0.4, 0.0], [-0.3, 0.4, 0.2]).tolist()
+        chain = kinematics.tcp_jacobian(q)
+        assert (chain[0], chain[1]) == kinematics.tcp_position_and_axis(q)
+        assert hint(q, target, chain) == hint(q, target)

@@ -35,7 +35,7 @@ def test_short_ppo_run_writes_checkpoint(ppo_run):
     assert meta["control_dt"] == 0.02
     assert_model_dir(ppo_run / "final")
     config = read_json(ppo_run / "config.json")
-    assert config["timesteps"] == 3000 and config["n_envs"] == 2 and config["algo"] == "ppo"
+    assert config["timesteps"] == 3000 and config["n_envs"] == 4 and config["algo"] == "ppo"
     summary = read_json(ppo_run / "summary.json")
     assert summary["finished"] is True and summary["num_timesteps"] == meta["num_timesteps"]
     assert len(summary["eval_history"]) >= 2  # --eval-freq 1000 over 3000 steps
@@ -53,7 +53,7 @@ def test_short_ppo_run_writes_checkpoint(ppo_run):
 def test_monitor_logs_episodes(ppo_run):
     """SB3 Monitor files: a '#{json}' line, the CSV header, then one row per episode."""
     files = sorted((ppo_run / "monitor").glob("*.monitor.csv"))
-    assert len(files) == 2  # one per environment
+    assert len(files) == 4  # one per environment
     rows = []
     for path in files:
         lines = path.read_text(encoding="utf-8").splitlines()
@@ -99,11 +99,18 @@ def test_evaluation_spread_over_processes_evaluates_the_same_episodes(tmp_path):
     results, lengths = evaluations["1"]
     assert lengths.shape == (2, 3)  # two evaluations of three episodes
     assert np.array_equal(results, evaluations["2"][0]) and np.array_equal(lengths, evaluations["2"][1])
+    # and the setting takes effect: one environment plays other episodes (rank 1's are not among them)
+    run_dir = tmp_path / "one_env"
+    assert train.main(["--timesteps", "1024", "--n-envs", "2", "--processes", "2", "--eval-freq", "512",
+                       "--eval-episodes", "3", "--eval-envs", "1", "--no-progress", "--run-dir", str(run_dir),
+                       "--hyperparams", str(tmp_path / "ppo_fast.yaml")]) == 0
+    with np.load(run_dir / "eval" / "evaluations.npz") as saved:
+        assert not np.array_equal(saved["results"], results)
     assert read_json(tmp_path / "processes_2" / "config.json")["eval_envs"] == 2  # a resume keeps it
 
 
 @pytest.mark.parametrize("option", [["--eval-min-training-success", "1.5"], ["--eval-min-training-success", "-0.1"],
-                                    ["--eval-envs", "0"]])
+                                    ["--eval-envs", "0"], ["--eval-episodes", "0"]])
 def test_evaluation_options_are_checked(option, tmp_path, capsys):
     code = train.main(["--timesteps", "1000", "--no-progress", "--run-dir", str(tmp_path / "run"), *option])
     assert code == 2
@@ -173,6 +180,7 @@ def test_resume_merge_takes_the_saved_run_but_for_options_typed_again():
     older = {key: value for key, value in SAVED_CONFIG.items() if key != "eval_min_training_success"}
     plain = TrainRun(resume=True, eval_min_training_success=0.5).resumed(older, frozenset())
     assert (plain.eval_freq, plain.subprocess, plain.eval_min_training_success) == (1500, False, 0.5)
+    assert plain.eval_envs == 1  # evaluated in one environment before the key existed: it goes on so
     # and config.json written back reads the same
     assert TrainRun().resumed(merged.saved_config({}), set()) == dataclasses.replace(TrainRun(), **{
         name: getattr(merged, name) for name in FIXED_ON_RESUME + KEPT_ON_RESUME})
@@ -198,7 +206,7 @@ def test_resumed_run_keeps_its_settings_unless_typed_again(ppo_run, tmp_path, mo
     assert train.main([*common, "--n-envs", "5", "--eval-freq", "20000"]) == 0
     assert train.main(common) == 0
     typed_again, plain = seen
-    assert typed_again.n_envs == plain.n_envs == 2 and plain.eval_freq == 1000 and typed_again.eval_freq == 20_000
+    assert typed_again.n_envs == plain.n_envs == 4 and plain.eval_freq == 1000 and typed_again.eval_freq == 20_000
     assert plain.checkpoint_freq == typed_again.checkpoint_freq == 1000 and plain.eval_episodes == 2
 
 

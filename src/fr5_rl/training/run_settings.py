@@ -101,9 +101,11 @@ class TrainRun:
     def check(self) -> None:
         """Refuse values no run can use.
 
-        :raises ConfigError: ``processes`` or ``eval_envs`` below 1, ``eval_min_training_success``
-            outside [0, 1].
+        :raises ConfigError: ``processes``, ``eval_envs`` or ``eval_episodes`` below 1,
+            ``eval_min_training_success`` outside [0, 1].
         """
+        if self.eval_episodes < 1:
+            raise ConfigError(f"--eval-episodes must be at least 1, got {self.eval_episodes}")
         if self.processes is not None and self.processes < 1:
             raise ConfigError(f"--processes must be at least 1, got {self.processes}")
         if self.eval_envs < 1:
@@ -131,8 +133,12 @@ class TrainRun:
         changes = {name: saved[name] for name in FIXED_ON_RESUME}
         for name in KEPT_ON_RESUME:
             key = _SAVED_AS.get(name, name)
-            if key in saved and name not in typed_again:
+            if name in typed_again:
+                continue
+            if key in saved:
                 changes[name] = not saved[key] if name == "subprocess" else saved[key]
+            elif name in _BEFORE_THE_KEY:
+                changes[name] = _BEFORE_THE_KEY[name]
         return dataclasses.replace(self, **changes)
 
     def saved_config(self, hyperparams_resolved: Mapping[str, Any], **extra: Any) -> Dict[str, Any]:
@@ -151,6 +157,9 @@ class TrainRun:
 
 # config.json keys that differ from the field's name (kept as they were: older runs resume too)
 _SAVED_AS = {"subprocess": "no_subprocess"}
+# What a config.json written before a key existed ran with, where that differs from today's
+# default: such a run resumes evaluating as it began (one environment, not eight).
+_BEFORE_THE_KEY = {"eval_envs": 1}
 
 
 def read_run_config(run_dir: Optional[Path]) -> Dict[str, Any]:

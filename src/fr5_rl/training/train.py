@@ -314,20 +314,6 @@ def train(run: TrainRun, t_start: Optional[float] = None,
     :raises ConfigError: a configuration problem, before any training time is spent.
     """
     t_start = time.time() if t_start is None else t_start
-    if run.subprocess and run.start_method == "forkserver" and (run.processes or available_cores()) > 1:
-        from .fork_server import start_fork_server
-
-        start_fork_server()  # before torch: the workers' imports happen meanwhile, on another core
-    import torch
-    from stable_baselines3.common.vec_env import VecNormalize
-
-    from .callbacks import REPLAY_FILE, save_checkpoint
-
-    torch.set_num_threads(max(run.torch_threads, 1))
-    # torch.distributions checks every distribution's parameters when it is built: a policy call
-    # per step and every minibatch of the update build one. The checks compute nothing the
-    # run uses (the same seed trains to the same weights without them) and cost ~5 % of a reach run.
-    torch.distributions.Distribution.set_default_validate_args(False)
     if run.resume:
         saved = read_run_config(run.run_dir)
         source = str(Path(run.run_dir) / "config.json")
@@ -348,6 +334,20 @@ def train(run: TrainRun, t_start: Optional[float] = None,
     run.check()
     for warning in check_hyperparameters(run.algo, hyper, run.n_envs, source):
         print(f"train.py: warning: {warning}", file=sys.stderr)
+    if run.subprocess and run.start_method == "forkserver" and (run.processes or available_cores()) > 1:
+        from .fork_server import start_fork_server
+
+        start_fork_server()  # before torch: the workers' imports happen meanwhile, on another core
+    import torch
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from .callbacks import REPLAY_FILE, save_checkpoint
+
+    torch.set_num_threads(max(run.torch_threads, 1))
+    # torch.distributions checks every distribution's parameters when it is built: a policy call
+    # per step and every minibatch of the update build one. The checks compute nothing the
+    # run uses (the same seed trains to the same weights without them) and cost ~5 % of a reach run.
+    torch.distributions.Distribution.set_default_validate_args(False)
     run_dir = Path(run.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "monitor").mkdir(exist_ok=True)
@@ -374,28 +374,34 @@ def train(run: TrainRun, t_start: Optional[float] = None,
     summary: Dict[str, Any] = json.loads(summary_path.read_text()) if run.resume and summary_path.is_file() else {}
     elapsed_before = float(summary.get("wall_time_s", 0.0))
 
-    if run.resume and recover_model_dir(latest):
-        model, venv = load_trained(latest, algo_cls, venv)
-        if (latest / REPLAY_FILE).is_file():
-            model.load_replay_buffer(latest / REPLAY_FILE)
-        print(f"train.py: resuming {run_dir} from step {model.num_timesteps}")
-    elif run.init_from is not None and not run.resume:
-        model, venv = initialise_from(run.init_from, run.task, run.algo, venv, meta, run_dir, hyper.algo_kwargs)
-        meta["initialised_from"] = {"model": str(run.init_from), "num_timesteps": int(model.num_timesteps)}
-        model.num_timesteps = 0  # --timesteps counts this run's steps
-        write_run_config(run_dir, run, hyper, init_from=str(run.init_from))
-        print(f"train.py: starting from {run.init_from} ({meta['initialised_from']['num_timesteps']} steps)")
-    else:
-        if run.resume:
-            print(f"train.py: {run_dir} has no checkpoint yet; starting it from scratch")
-        norm = hyper.normalize
-        venv = VecNormalize(venv, norm_obs=norm.norm_obs, norm_reward=norm.norm_reward, clip_obs=norm.clip_obs,
-                            gamma=float(hyper.algo_kwargs.get("gamma", 0.99)))
-        kwargs = dict(hyper.algo_kwargs)
-        policy = kwargs.pop("policy", "MlpPolicy")
-        model = algo_cls(policy, venv, seed=run.seed, device="cpu", tensorboard_log=str(run_dir / "tb"),
-                         verbose=0, **kwargs)
-        write_run_config(run_dir, run, hyper)
+    try:
+        if run.resume and recover_model_dir(latest):
+            model, venv = load_trained(latest, algo_cls, venv)
+            if (latest / REPLAY_FILE).is_file():
+                model.load_replay_buffer(latest / REPLAY_FILE)
+            print(f"train.py: resuming {run_dir} from step {model.num_timesteps}")
+        elif run.init_from is not None and not run.resume:
+            model, venv = initialise_from(run.init_from, run.task, run.algo, venv, meta, run_dir, hyper.algo_kwargs)
+            meta["initialised_from"] = {"model": str(run.init_from), "num_timesteps": int(model.num_timesteps)}
+            model.num_timesteps = 0  # --timesteps counts this run's steps
+            write_run_config(run_dir, run, hyper, init_from=str(run.init_from))
+            print(f"train.py: starting from {run.init_from} ({meta['initialised_from']['num_timesteps']} steps)")
+        else:
+            if run.resume:
+                print(f"train.py: {run_dir} has no checkpoint yet; starting it from scratch")
+            norm = hyper.normalize
+            venv = VecNormalize(venv, norm_obs=norm.norm_obs, norm_reward=norm.norm_reward, clip_obs=norm.clip_obs,
+                                gamma=float(hyper.algo_kwargs.get("gamma", 0.99)))
+            kwargs = dict(hyper.algo_kwargs)
+            policy = kwargs.pop("policy", "MlpPolicy")
+            model = algo_cls(policy, venv, seed=run.seed, device="cpu", tensorboard_log=str(run_dir / "tb"),
+                             verbose=0, **kwargs)
+            write_run_config(run_dir, run, hyper)
+    except BaseException:
+        # A model refused here (another task, damaged files) leaves no worker processes behind.
+        close_vec_env(venv, True)
+        close_vec_env(eval_env, True)
+        raise
     eval_env = VecNormalize(eval_env, training=False, norm_obs=venv.norm_obs, norm_reward=False,
                             clip_obs=venv.clip_obs)
     summary.update({"task": run.task, "algo": run.algo, "seed": run.seed, "n_envs": run.n_envs,
