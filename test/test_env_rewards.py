@@ -112,6 +112,35 @@ def test_plain_episode_share_draws_some_episodes_without_randomisation():
         FR5Env(task="reach", config={"randomisation": {**perturbed, "plain_episode_share": 1.0}})
 
 
+def test_target_action_latency_steps_replaces_the_latency_only_where_the_camera_is_drawn():
+    """randomisation.target_action_latency_steps: the episodes that see the target through the
+    camera's timing draw their whole-step latency from it; the others keep every draw they had."""
+    from fr5_rl.config import ConfigError
+
+    perturbed = {"enabled": True, "action_latency_steps": [2, 2], "target_share": 0.5}
+    before = FR5Env(task="grasp", config={"randomisation": perturbed})
+    tied = FR5Env(task="grasp", config={"randomisation": {**perturbed, "target_action_latency_steps": [0, 0]}})
+    with_camera = 0
+    try:
+        for seed in range(40):
+            before.reset(seed=seed)
+            tied.reset(seed=seed)
+            assert (before._target is None) == (tied._target is None)
+            if before._target is None:
+                assert before._latency_steps == tied._latency_steps == 2
+            else:
+                with_camera += 1
+                assert (before._latency_steps, tied._latency_steps) == (2, 0)
+                assert before._target.latency == tied._target.latency
+            assert before._object_dims == tied._object_dims
+    finally:
+        before.close()
+        tied.close()
+    assert 8 <= with_camera <= 32, with_camera  # binomial(40, 0.5): outside this 1 time in 10^4
+    with pytest.raises(ConfigError, match="target_action_latency_steps"):
+        FR5Env(task="grasp", config={"randomisation": {**perturbed, "target_action_latency_steps": [1, 0]}})
+
+
 def test_timing_share_leaves_some_perturbed_episodes_with_whole_step_latency_only():
     """randomisation.timing_share: that share of the perturbed episodes gets the in-period timing
     (command delay, observation age); the others keep their latency but no timing, so that "no

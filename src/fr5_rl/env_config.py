@@ -194,6 +194,7 @@ class RandomisationConfig:
     plain_episode_share: float
     gripper_bridge_share: float
     target_share: float
+    target_action_latency_steps: Optional[List[int]]  # inclusive range in the target's episodes, None: action_latency_steps
     target_latency_s: List[float]
     target_rate_hz: float
     response_time_constant_s: List[float]  # s per joint, [] none
@@ -207,6 +208,10 @@ class RandomisationConfig:
             raise ConfigError(f"randomisation.target_latency_s: {self.target_latency_s} must satisfy 0 <= low <= high (s)")
         if self.target_rate_hz <= 0.0:
             raise ConfigError(f"randomisation.target_rate_hz: {self.target_rate_hz} must be positive (Hz)")
+        for key in ("action_latency_steps", "target_action_latency_steps"):
+            steps = getattr(self, key)
+            if steps is not None and not (len(steps) == 2 and 0 <= steps[0] <= steps[1]):
+                raise ConfigError(f"randomisation.{key}: {steps} must be [low, high] whole steps with 0 <= low <= high")
         if not 0.0 <= self.gripper_bridge_share <= 1.0:
             raise ConfigError(f"randomisation.gripper_bridge_share: {self.gripper_bridge_share} must be in [0, 1]")
         if not 0.0 <= self.plain_episode_share < 1.0:
