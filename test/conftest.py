@@ -25,14 +25,15 @@ def cluster():
 
 
 # ----------------------------------------------------------------------------- a short PPO run
-# One 3,000-step PPO reach run for the whole session: test_training and test_fine_tuning start from it.
+# One 6,000-step PPO reach run for the whole session: test_training and test_fine_tuning start from it.
 @pytest.fixture(scope="session")
 def ppo_run(tmp_path_factory) -> Path:
     run_dir = tmp_path_factory.mktemp("ppo") / "run"
     from fr5_rl.cli import train
 
-    # 4 environments: the default config's 64 steps each make one batch of 256
-    code = train.main(["--timesteps", "3000", "--n-envs", "4", "--no-subprocess", "--checkpoint-freq", "1000",
+    # 32 environments, the default config's: its 16 steps each make one batch of 512; 6,000 steps
+    # end at least one 150-step episode in each
+    code = train.main(["--timesteps", "6000", "--n-envs", "32", "--no-subprocess", "--checkpoint-freq", "1000",
                        "--eval-freq", "1000", "--eval-episodes", "2", "--no-progress", "--run-dir", str(run_dir)])
     assert code == 0
     return run_dir

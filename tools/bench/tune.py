@@ -95,7 +95,10 @@ def throughput(mode: Dict[str, Any], scratch: Path) -> Dict[str, Any]:
     space = write_space(scratch / "throughput.yaml", "ppo_reach",
                         {"n_envs": 1, "timesteps": timesteps, "eval_freq": timesteps, "eval_episodes": 2,
                          "target_success": 1.0, "stop_at_success": False, "max_failures": 0},
-                        {"grace_period": timesteps, "reduction_factor": 2}, {}, {"seed": {"grid": list(range(trials))}})
+                        {"grace_period": timesteps, "reduction_factor": 2},
+                        # one environment per trial: its rollout is the shipped update's 512 samples
+                        {"algo_kwargs.n_steps": 512, "algo_kwargs.batch_size": 512},
+                        {"seed": {"grid": list(range(trials))}})
     result: Dict[str, Any] = {"trials": trials, "timesteps_per_trial": timesteps}
     for nodes in (1, 2):
         run = sweep(nodes, space, scratch / f"throughput_{nodes}", 1, "random", "none")
