@@ -247,6 +247,7 @@ class ObjectTracker:
         self.detector_settings = detector_settings
         self.table = table
         self._last_width: Optional[float] = None  # the fingers' opening (m) in the last frame; None: unknown
+        self._grasp_tcp: Optional[np.ndarray] = None  # see _grasp_pose
         self._track = Track.lost()
 
     @property
@@ -257,6 +258,7 @@ class ObjectTracker:
     def reset(self) -> None:
         """Forget the object (a new one will be detected before anything is published)."""
         self._track = Track.lost()
+        self._grasp_tcp = None
 
     def update(self, result: Union[Detection, Refusal], stamp: float, depth: Optional[np.ndarray] = None,
                intrinsics: Optional[Intrinsics] = None, table_from_optical: Optional[np.ndarray] = None,
@@ -296,6 +298,7 @@ class ObjectTracker:
             track.position = np.array(result.position_table, dtype=np.float64)
             track.top_height, track.size, track.last_seen = result.top_height, result.size, stamp
             track.rest = (float(track.position[2]), result.top_height)  # seen: standing on the table
+            self._grasp_tcp = None  # standing, so not (yet) between the fingers
             return TrackedObject(tuple(track.position.tolist()), TrackState.SEEN, stamp, result)
         if not tracking:
             return result
@@ -310,15 +313,18 @@ class ObjectTracker:
                                           f"{s.hidden_timeout:g} s")
         if look is None:
             return result  # no look at where it stands: the track stays as it is
+        # Closed on it before the look at where it stood: a fast lift carries it off that spot
+        # within a frame, and the bare table there then means "in the hand", not "gone".
+        grasped_from = self._grasp_pose(tcp, gripper_width)
+        if not closing and grasped_from is not None:
+            self._take_into_hand(tcp, grasped_from)
+            return self._held(TrackState.IN_HAND)
         gone = self._gone(look)
         if gone is not None and not self._nudged(look):
             self.reset()
             return Refusal(result.reason, f"{result.detail}; {gone}")
         if result.reason is RefusalReason.NO_OBJECT and self._track.in_front == 0.0:
             return result  # nothing in front of it and no object: not hidden, it was just not found
-        if not closing and self._closed_on_it(tcp, gripper_width):
-            self._take_into_hand(tcp)
-            return self._held(TrackState.IN_HAND)
         return self._held(TrackState.HIDDEN)
 
     def _follow_hand(self, result: Union[Detection, Refusal], stamp: float, look, tcp: Optional[np.ndarray],
@@ -346,10 +352,26 @@ class ObjectTracker:
             return Refusal(RefusalReason.NO_OBJECT, f"not in the hand any more: {gone}")
         return self._held(TrackState.IN_HAND)
 
-    def _take_into_hand(self, tcp: np.ndarray) -> None:
-        """Keep the object's offset in the tcp frame, centred between the fingers."""
+    def _grasp_pose(self, tcp: Optional[np.ndarray], width: Optional[float]) -> Optional[np.ndarray]:
+        """The tcp pose (4x4, table frame) at which the fingers came around the tracked object,
+        while they stay at a width that holds it; None otherwise.
+
+        The fingers stop closing a frame or two after they reach the object, and a policy may lift
+        at once: by the frame that shows them stopped, the tcp can be further than
+        ``grasp_radius`` from where the object stood. The pose of the last frame that had the
+        fingers around it is kept until they open past, or close below, its width."""
+        if self._closed_on_it(tcp, width):
+            self._grasp_tcp = tcp
+        elif width is None or self._track.state is TrackState.LOST or not self._fits(width):
+            self._grasp_tcp = None
+        return self._grasp_tcp
+
+    def _take_into_hand(self, tcp: np.ndarray, grasped_from: np.ndarray) -> None:
+        """Keep the object's offset in the tcp frame, centred between the fingers, as it was when
+        the tcp stood at ``grasped_from``; place it with the tcp at ``tcp`` now."""
         track = self._track
-        in_tcp = (np.linalg.inv(tcp) @ np.append(track.position, 1.0))[:3]
+        self._grasp_tcp = None
+        in_tcp = (np.linalg.inv(grasped_from) @ np.append(track.position, 1.0))[:3]
         axis = np.asarray(self.settings.closing_axis, dtype=np.float64)
         axis /= np.linalg.norm(axis)
         track.in_tcp = in_tcp - float(in_tcp @ axis) * axis  # centred between the fingers
