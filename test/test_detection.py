@@ -248,6 +248,32 @@ def test_an_object_in_the_hand_moves_with_the_tcp():
     assert isinstance(dropped, Refusal) and "bare" in dropped.detail
 
 
+def test_an_object_lifted_before_the_fingers_show_stopped_is_in_the_hand():
+    """A policy lifts as soon as the fingers close: by the frame that shows them stopped, the tcp
+    can be 8 cm up and the table bare where the object stood. The fingers came around it in the
+    frame before, so it is in the hand, at the offset it had then (not dropped as gone)."""
+    frames = Frames()
+    seen = frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08)
+    centre, size = np.array(seen.position_table), seen.detection.size
+    grasp = tcp_at(*(centre + [0.0, 0.0, 0.01]))
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=0.08).state is TrackState.HIDDEN  # open
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=size).state is TrackState.HIDDEN  # closing
+    lifted_tcp = centre + [0.0, 0.02, 0.09]
+    lifted = frames(scene(), tcp=tcp_at(*lifted_tcp), width=size)
+    assert isinstance(lifted, TrackedObject) and lifted.state is TrackState.IN_HAND, lifted
+    np.testing.assert_allclose(lifted.position_tcp, [0.0, 0.0, -0.01], atol=1e-9)
+    np.testing.assert_allclose(lifted.position_table, lifted_tcp + [0.0, 0.0, -0.01], atol=1e-9)
+
+    # Opened past its width in between: whatever the fingers stop on later, far away, is not it.
+    frames = Frames()
+    frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08)
+    frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=size)
+    frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=0.08)
+    far = tcp_at(*(centre + [0.1, 0.0, 0.05]))
+    frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=far, width=size)
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=far, width=size).state is TrackState.HIDDEN
+
+
 def test_an_object_that_slipped_out_of_closed_fingers_is_not_followed():
     frames = Frames()
     seen = frames(scene(OBJECT))
