@@ -629,6 +629,6 @@ class FR5Env(gym.Env):
             frame_period = 1.0 / rnd.target_rate_hz
             self._target = DelayedTarget(float(rng.uniform(*rnd.target_latency_s)), frame_period,
                                          float(rng.uniform(0.0, frame_period)))
-            if rnd.target_action_latency_steps is not None:  # drawn last, so other configurations keep their episodes
+            if rnd.target_action_latency_steps is not None:  # drawn only when set: configurations without it keep their episodes
                 lo, hi = rnd.target_action_latency_steps
                 self._latency_steps = int(rng.integers(lo, hi + 1))
