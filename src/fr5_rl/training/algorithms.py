@@ -4,6 +4,7 @@ checked against the Stable-Baselines3 algorithm it configures (the file's schema
 from __future__ import annotations
 
 import inspect
+import math
 from pathlib import Path
 from typing import List, Optional
 
@@ -54,11 +55,16 @@ def check_hyperparameters(algo: str, hyper: Hyperparameters, n_envs: int, source
         batch_size = int(kwargs.get("batch_size", 64))
         rollout = n_steps * n_envs
         if rollout % batch_size != 0:
-            divisors = [d for d in range(32, min(rollout, 4096) + 1) if rollout % d == 0]
-            suggestion = min(divisors, key=lambda d: abs(d - batch_size)) if divisors else 1
+            divisors = [d for d in range(2, min(rollout, 4096) + 1) if rollout % d == 0]
+            suggestion = min(divisors, key=lambda d: abs(d - batch_size)) if divisors else None
+            # the smallest n_steps that keeps batch_size with these environments
+            steps_unit = batch_size // math.gcd(batch_size, n_envs)
+            keep_batch = steps_unit * max(1, round(n_steps / steps_unit))
             raise ConfigError(
                 f"PPO batch_size={batch_size} must divide n_steps * n_envs = {n_steps} * {n_envs} = "
-                f"{rollout}; change batch_size (e.g. {suggestion}), n_steps or --n-envs"
+                f"{rollout}. Keep the config's --n-envs, or set in a --hyperparams file (whose 'base' "
+                f"is this config) algo_kwargs.n_steps: {keep_batch}"
+                + (f" or algo_kwargs.batch_size: {suggestion}" if suggestion else "")
             )
         if batch_size < 2:
             raise ConfigError("PPO batch_size must be at least 2")
