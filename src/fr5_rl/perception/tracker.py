@@ -63,10 +63,7 @@ class TrackerSettings:
     :param max_table_fraction: where the last seen top face was, at most this fraction of the
         pixels may show the bare table; more means the object has gone (hold).
     :param front_tolerance: m; a depth this much nearer than the top face is something in front of it.
-    :param grasp_radius: m; the fingers hold the object only if the tcp is, or was within
-        ``grasp_memory``, this close to its centre.
-    :param grasp_memory: s a tcp pose with the fingers around the object is remembered while they
-        stay at its width: a policy may lift before a frame shows the fingers stopped.
+    :param grasp_radius: m; the fingers hold the object only if the tcp is this close to its centre.
     :param grasp_width_margin: m; the fingers are closed on it when their opening is at most the
         object's measured width plus this (and more than ``min_grasp_fraction`` of it).
     :param min_grasp_fraction: fingers closed narrower than this fraction of the object's
@@ -90,7 +87,6 @@ class TrackerSettings:
     max_table_fraction: float
     front_tolerance: float
     grasp_radius: float
-    grasp_memory: float
     grasp_width_margin: float
     min_grasp_fraction: float
     closing_tolerance: float
@@ -103,7 +99,7 @@ class TrackerSettings:
     def check(self, source: str) -> None:
         """Refuse values the tracker cannot work with (called by :func:`fr5_rl.config.typed`)."""
         if min(self.hidden_timeout, self.in_hand_timeout, self.front_tolerance, self.grasp_radius,
-               self.grasp_memory, self.grasp_width_margin, self.min_grasp_fraction, self.nudge_radius) < 0 \
+               self.grasp_width_margin, self.min_grasp_fraction, self.nudge_radius) < 0 \
                 or self.nudge_step <= 0 or not 0 <= self.max_table_fraction <= 1:
             raise ConfigError(f"{source}: the tracking parameters must be >= 0 and max_table_fraction in [0, 1] "
                               "(hidden_timeout 0 switches tracking off), nudge_step > 0")
@@ -222,9 +218,10 @@ class ObjectTracker:
     - detected: that position (SEEN);
     - the fingers have closed on it (their opening at most its measured width plus
       ``grasp_width_margin``, more than ``min_grasp_fraction`` of it, and no longer closing) with the
-      tcp within ``grasp_radius`` of it, in this frame or up to ``grasp_memory`` before while they
-      kept that width (a policy lifts at once, and the spot where it stood may be bare by the
-      frame that shows the fingers stopped): it is in the hand (IN_HAND). Its offset in the tcp
+      tcp within ``grasp_radius`` of it, in this frame or in an earlier one since which they have
+      kept that width (a policy lifts at once: by the frame that shows the fingers stopped, the
+      spot where it stood may be bare), checked before the look at that spot: it is in the hand
+      (IN_HAND). Its offset in the tcp
       frame is kept and published *in the tcp frame*, so whoever uses it places it with the
       newest tcp pose: no camera latency on a held object. It stays in the hand until the
       fingers open or close on nothing, where it would be the camera sees the bare table, or
@@ -253,7 +250,7 @@ class ObjectTracker:
         self.detector_settings = detector_settings
         self.table = table
         self._last_width: Optional[float] = None  # the fingers' opening (m) in the last frame; None: unknown
-        self._grasp_tcp: Optional[Tuple[np.ndarray, float]] = None  # (tcp pose, stamp): see _remember_grasp
+        self._grasp_tcp: Optional[np.ndarray] = None  # see _grasp_pose
         self._track = Track.lost()
 
     @property
@@ -304,7 +301,7 @@ class ObjectTracker:
             track.position = np.array(result.position_table, dtype=np.float64)
             track.top_height, track.size, track.last_seen = result.top_height, result.size, stamp
             track.rest = (float(track.position[2]), result.top_height)  # seen: standing on the table
-            self._remember_grasp(tcp, gripper_width, stamp)  # seen between the fingers as they close
+            self._grasp_tcp = None  # standing, so not (yet) between the fingers
             return TrackedObject(tuple(track.position.tolist()), TrackState.SEEN, stamp, result)
         if not tracking:
             return result
@@ -319,23 +316,18 @@ class ObjectTracker:
                                           f"{s.hidden_timeout:g} s")
         if look is None:
             return result  # no look at where it stands: the track stays as it is
-        grasped_from = self._remember_grasp(tcp, gripper_width, stamp)
-        gone = self._gone(look)
-        if gone is not None and grasped_from is not None:
-            # The fingers came around it a moment ago and still hold its width: a fast lift has
-            # carried it off the spot, which is bare now. In the hand once they stop closing.
-            if closing:
-                return self._held(TrackState.HIDDEN)
+        # Closed on it before the look at where it stood: a fast lift carries it off that spot
+        # within a frame, and the bare table there then means "in the hand", not "gone".
+        grasped_from = self._grasp_pose(tcp, gripper_width)
+        if not closing and tcp is not None and grasped_from is not None:
             self._take_into_hand(tcp, grasped_from)
             return self._held(TrackState.IN_HAND)
+        gone = self._gone(look)
         if gone is not None and not self._nudged(look):
             self.reset()
             return Refusal(result.reason, f"{result.detail}; {gone}")
         if result.reason is RefusalReason.NO_OBJECT and self._track.in_front == 0.0:
             return result  # nothing in front of it and no object: not hidden, it was just not found
-        if not closing and grasped_from is not None:
-            self._take_into_hand(tcp, grasped_from)
-            return self._held(TrackState.IN_HAND)
         return self._held(TrackState.HIDDEN)
 
     def _follow_hand(self, result: Union[Detection, Refusal], stamp: float, look, tcp: Optional[np.ndarray],
@@ -363,21 +355,20 @@ class ObjectTracker:
             return Refusal(RefusalReason.NO_OBJECT, f"not in the hand any more: {gone}")
         return self._held(TrackState.IN_HAND)
 
-    def _remember_grasp(self, tcp: Optional[np.ndarray], width: Optional[float], stamp: float) -> Optional[np.ndarray]:
-        """The tcp pose (4x4, table frame) at which the fingers were around the tracked object at a
-        width that holds it, in this frame or up to ``grasp_memory`` s before, while they stay at
-        that width; None otherwise, and None without this frame's tcp pose.
+    def _grasp_pose(self, tcp: Optional[np.ndarray], width: Optional[float]) -> Optional[np.ndarray]:
+        """The tcp pose (4x4, table frame) at which the fingers came around the tracked object,
+        while they stay at a width that holds it; None otherwise.
 
         The fingers stop closing a frame or two after they reach the object, and a policy may lift
-        at once: by the frame that shows them stopped, the tcp can be 6-15 cm from where the object
-        stood. The memory is short, so a half-closed hand that moves on is not taken to hold it."""
+        at once: by the frame that shows them stopped, the tcp can be further than
+        ``grasp_radius`` from where the object stood. The pose of the last frame that had the
+        fingers around it is kept until they open past, or close below, its width, the object is
+        seen standing, or the track is reset; a frame without the tcp pose keeps it."""
         if self._closed_on_it(tcp, width):
-            self._grasp_tcp = (np.array(tcp, dtype=np.float64), stamp)
+            self._grasp_tcp = np.array(tcp, dtype=np.float64)
         elif width is None or not self._fits(width):
-            self._grasp_tcp = None  # opened past its width, or closed on nothing
-        if tcp is None or self._grasp_tcp is None or stamp - self._grasp_tcp[1] > self.settings.grasp_memory:
-            return None
-        return self._grasp_tcp[0]
+            self._grasp_tcp = None
+        return self._grasp_tcp
 
     def _take_into_hand(self, tcp: np.ndarray, grasped_from: np.ndarray) -> None:
         """Keep the object's offset in the tcp frame, centred between the fingers, as it was when
