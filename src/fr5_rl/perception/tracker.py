@@ -63,7 +63,8 @@ class TrackerSettings:
     :param max_table_fraction: where the last seen top face was, at most this fraction of the
         pixels may show the bare table; more means the object has gone (hold).
     :param front_tolerance: m; a depth this much nearer than the top face is something in front of it.
-    :param grasp_radius: m; the fingers hold the object only if the tcp is this close to its centre.
+    :param grasp_radius: m; the fingers hold the object only if the tcp was this close to its centre
+        when they came around it (:meth:`ObjectTracker._grasp_pose`).
     :param grasp_width_margin: m; the fingers are closed on it when their opening is at most the
         object's measured width plus this (and more than ``min_grasp_fraction`` of it).
     :param min_grasp_fraction: fingers closed narrower than this fraction of the object's
