@@ -273,6 +273,23 @@ def test_ppo_divisibility_check(tmp_path, capsys):
     check_hyperparameters("ppo", data, 4)  # 400 % 80 == 0: accepted
 
 
+def test_batch_error_suggests_settings_that_are_accepted():
+    """The default reach config (32 x 16 steps, batch 512) with fewer environments: the error
+    names an n_steps and a batch_size, and each, set alone, is accepted."""
+    import dataclasses
+    import re
+
+    shipped = load_hyperparameters("ppo", "reach")
+    for n_envs in (1, 4, 5):
+        with pytest.raises(ConfigError) as refused:
+            check_hyperparameters("ppo", shipped, n_envs)
+        message = str(refused.value)
+        for key in ("n_steps", "batch_size"):
+            value = int(re.search(rf"algo_kwargs\.{key}: (\d+)", message).group(1))
+            fixed = dataclasses.replace(shipped, algo_kwargs={**shipped.algo_kwargs, key: value})
+            check_hyperparameters("ppo", fixed, n_envs)
+
+
 def test_shipped_hyperparameters_pass_their_checks():
     # <algo>_<task>.yaml, and variants such as ppo_reach_finetune.yaml
     shipped = [(path.stem.split("_"), path) for path in (package_root() / "config").glob("*_*.yaml")
