@@ -20,9 +20,10 @@ from fr5_rl.env_config import load_env_config  # noqa: E402
 from fr5_rl.envs import FR5Env  # noqa: E402
 
 
-def emulation(profile: str, **overrides):
+def emulation(profile: str, hidden_radius: float = timing.CAMERA_HIDDEN_RADIUS_M, **overrides):
     params = timing.simulator_profile(profile)
-    args = argparse.Namespace(finger_source=None, velocity_source=None, episode_start=None, **overrides)
+    args = argparse.Namespace(**{"finger_source": None, "velocity_source": None, "episode_start": None,
+                                 "target": "simulator", **overrides})
     chain = timing.Chain.of(params, args)
     policy = load_policy(package_root() / "models" / "reach", "onnx")
     env = FR5Env("reach", config={"reach": {"simulation": {"physics_dt": float(params["physics_dt"]),
@@ -33,7 +34,7 @@ def emulation(profile: str, **overrides):
     step = DeploymentStep(policy, load_robot_spec(), trained, float(node["joint_state_timeout"]),
                           float(node["target_timeout"]), guard=guard if chain.episode_start == "go_to_start" else None)
     return timing.ChainEmulation(env, step, chain, params, 0.002, np.random.default_rng(0),
-                                 trained.observation.joint_velocity_source), env
+                                 trained.observation.joint_velocity_source, hidden_radius), env
 
 
 def test_the_fairino_profile_is_the_rehearsals_chain():
@@ -65,5 +66,40 @@ def test_the_default_profile_takes_fingers_and_velocities_from_the_driver():
         assert run.bridge is None
         record = run.run_episode(930_000)
         assert record["start_move_s"] == 0.0 and record["steps"] > 0
+    finally:
+        env.close()
+
+
+def test_the_camera_target_arrives_one_latency_late_stamped_with_its_capture_and_held_while_hidden():
+    """--target camera: the node gets the object's position as the camera saw it one latency
+    before (stamped with that capture), and while the tcp is within the hidden radius the
+    position the object had when last seen."""
+    run, env = emulation("fairino", target="camera", hidden_radius=0.0)
+    try:
+        assert run.chain.target == "camera"
+        env.reset(seed=930_000)
+        camera = timing.DelayedTarget(latency=0.1, frame_period=0.02, phase=0.0)
+        start = env.object_position().copy()
+        readings = []
+        for k in range(15):
+            if k == 5:  # pushed 5 cm at 0.1 s
+                env.world.place_object((start[0] + 0.05, start[1], start[2]), yaw=0.0)
+            run.clock.now += 0.02
+            readings.append(run._target(camera, 0.02 * k))
+        assert all(r.stamp == pytest.approx(r.received - 0.1) for r in readings)
+        seen_x = [r.value[0] - start[0] for r in readings]
+        assert max(abs(x) for x in seen_x[:10]) < 1e-3  # the push is not seen before 0.1 s have passed
+        assert seen_x[10] == pytest.approx(0.05, abs=1e-3)
+        # The tcp within the radius (every distance is, at 10 m): the push stays unseen.
+        run.hidden_radius = 10.0
+        env.reset(seed=930_000)
+        camera = timing.DelayedTarget(latency=0.1, frame_period=0.02, phase=0.0)
+        readings = []
+        for k in range(15):
+            if k == 5:
+                env.world.place_object((start[0] + 0.05, start[1], start[2]), yaw=0.0)
+            run.clock.now += 0.02
+            readings.append(run._target(camera, 0.02 * k))
+        assert max(abs(r.value[0] - start[0]) for r in readings) < 1e-3
     finally:
         env.close()

@@ -144,6 +144,35 @@ def test_target_action_latency_steps_replaces_the_latency_only_where_the_camera_
         FR5Env(task="grasp", config={"randomisation": {**perturbed, "target_action_latency_steps": [1, 0]}})
 
 
+@pytest.mark.parametrize("arm_steps, gripper_steps", [(0, 2), (2, 0), (1, 1)])
+def test_gripper_latency_steps_delays_the_gripper_apart_from_the_arm(arm_steps, gripper_steps):
+    """randomisation.gripper_latency_steps: the gripper's command acts that many steps late, the
+    arm's after action_latency_steps; until its first action arrives each holds."""
+    from fr5_rl.config import ConfigError
+
+    env = FR5Env(task="grasp", config={"randomisation": {
+        "enabled": True, "plain_episode_share": 0.0, "action_latency_steps": [arm_steps, arm_steps],
+        "gripper_latency_steps": [gripper_steps, gripper_steps]}})
+    try:
+        env.reset(seed=3)
+        open_width = env.gripper_command_width
+        action = np.zeros(7, dtype=np.float32)
+        action[0], action[6] = 1.0, -1.0  # j1 on, gripper closed
+        start_j1 = float(env.joint_positions()[0])
+        widths, j1_moved = [], []
+        for _ in range(4):
+            env.step(action)
+            widths.append(env.gripper_command_width)
+            j1_moved.append(abs(float(env.joint_positions()[0]) - start_j1) > 1e-3)
+    finally:
+        env.close()
+    assert widths[:gripper_steps] == [open_width] * gripper_steps  # held open until its first action
+    assert widths[gripper_steps] == pytest.approx(0.0)
+    assert j1_moved.index(True) == arm_steps
+    with pytest.raises(ConfigError, match="gripper_latency_steps"):
+        FR5Env(task="grasp", config={"randomisation": {"gripper_latency_steps": [2, 1]}})
+
+
 def test_timing_share_leaves_some_perturbed_episodes_with_whole_step_latency_only():
     """randomisation.timing_share: that share of the perturbed episodes gets the in-period timing
     (command delay, observation age); the others keep their latency but no timing, so that "no

@@ -149,8 +149,8 @@ def test_the_environment_sees_the_object_late_in_camera_episodes():
         seen = []
         observe = target.observe
 
-        def spy(position, now, in_hand):
-            result = observe(position, now, in_hand)
+        def spy(position, now, in_hand, hidden=False):
+            result = observe(position, now, in_hand, hidden)
             seen.append((now, result[0]))
             return result
 
@@ -165,3 +165,41 @@ def test_the_environment_sees_the_object_late_in_camera_episodes():
         assert 0.15 <= first_seen <= 0.15 + 2.0 / 15.0 + 0.02 + 1e-9
     finally:
         env.close()
+
+
+def test_a_frame_captured_while_the_hand_hides_the_object_shows_where_it_was_last_seen():
+    """The detector's hold: captures while hidden repeat the last visible one (a push under the
+    hand is not followed); once seen again the target follows the object (one latency late)."""
+    from fr5_rl.observation import DelayedTarget
+
+    target = DelayedTarget(latency=0.0, frame_period=0.02, phase=0.0)
+    seen = [target.observe((0.02 * k, 0.0, 0.0), 0.02 * k, in_hand=False, hidden=10 <= k < 20)[0]
+            for k in range(30)]
+    assert seen[:10] == pytest.approx([0.02 * k for k in range(10)])
+    assert seen[10:20] == pytest.approx([0.18] * 10)  # the capture at k = 9, the last one visible
+    assert seen[20:] == pytest.approx([0.02 * k for k in range(20, 30)])
+    # Hidden from the first capture on: nothing was seen yet, so the hidden frame is all there is.
+    first = DelayedTarget(latency=0.0, frame_period=0.02, phase=0.0)
+    assert first.observe((1.0, 0.0, 0.0), 0.0, in_hand=False, hidden=True)[0] == 1.0
+
+
+def test_the_environment_holds_the_target_while_the_tcp_is_within_the_hidden_radius():
+    """randomisation.target_hidden_radius: with the tcp farther than the radius the camera episode
+    follows a pushed object; within it, it keeps the position the object had when last seen."""
+    camera = {**PERTURBED, "target_share": 1.0, "target_latency_s": [0.0, 0.0], "target_rate_hz": 50.0}
+    moved = {}
+    for radius in (0.0, 10.0):  # 10 m: the tcp is always "near"
+        env = FR5Env(task="grasp", config={"randomisation": {**camera, "target_hidden_radius": radius}})
+        try:
+            obs, _ = env.reset(seed=2)
+            start = env.object_position().copy()
+            env.world.place_object((start[0] + 0.05, start[1], start[2]), yaw=0.0)
+            for _ in range(5):
+                later, *_ = env.step(np.zeros(7))
+            scale = env.cfg.observation.relative_position_scale
+            # Object minus tcp along x (observation 20, scaled), in m: the arm holds still.
+            moved[radius] = float(later[20] - obs[20]) * scale
+        finally:
+            env.close()
+    assert moved[0.0] == pytest.approx(0.05, abs=0.005)  # followed the push
+    assert moved[10.0] == pytest.approx(0.0, abs=0.005)  # held where it was last seen

@@ -197,6 +197,8 @@ class RandomisationConfig:
     target_action_latency_steps: Optional[List[int]]  # inclusive range in the target's episodes, None: action_latency_steps
     target_latency_s: List[float]
     target_rate_hz: float
+    gripper_latency_steps: Optional[List[int]]  # inclusive range drawn apart from the arm's, None: the arm's
+    target_hidden_radius: float  # m, tcp to object centre within which a frame shows it hidden; 0: never
     response_time_constant_s: List[float]  # s per joint, [] none
 
     def check(self, source: str) -> None:
@@ -208,7 +210,10 @@ class RandomisationConfig:
             raise ConfigError(f"randomisation.target_latency_s: {self.target_latency_s} must satisfy 0 <= low <= high (s)")
         if self.target_rate_hz <= 0.0:
             raise ConfigError(f"randomisation.target_rate_hz: {self.target_rate_hz} must be positive (Hz)")
-        for key in ("action_latency_steps", "target_action_latency_steps"):
+        if not 0.0 <= self.target_hidden_radius < float("inf"):
+            raise ConfigError(f"randomisation.target_hidden_radius: {self.target_hidden_radius} must be a finite "
+                              "distance >= 0 (m; 0: the camera always sees the object)")
+        for key in ("action_latency_steps", "target_action_latency_steps", "gripper_latency_steps"):
             steps = getattr(self, key)
             if steps is not None and not (len(steps) == 2 and 0 <= steps[0] <= steps[1]):
                 raise ConfigError(f"randomisation.{key}: {steps} must be [low, high] whole steps with 0 <= low <= high")

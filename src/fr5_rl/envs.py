@@ -178,6 +178,7 @@ class FR5Env(gym.Env):
         self._sent_gripper_width = self._gripper_command_width
         self._action_queue: deque = deque()
         self._latency_steps = 0
+        self._gripper_latency_steps: Optional[int] = None  # None: the arm's latency
         self._obs_noise_std = 0.0
         # Real-time timing within a period (randomisation.command_delay_s, observation_age_s):
         # ranges (s) drawn every step, and the command standing until a delayed one takes over.
@@ -202,6 +203,8 @@ class FR5Env(gym.Env):
         # randomisation.target_share: the object seen through the camera's timing, or None.
         self._target: Optional[DelayedTarget] = None
         self._held = None  # hold_object's constraint (the camera's calibration), or None
+        # randomisation.target_hidden_radius; -1: never hidden (a distance is never below it)
+        self._target_hidden_radius = self.cfg.randomisation.target_hidden_radius or -1.0
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None
@@ -474,7 +477,10 @@ class FR5Env(gym.Env):
         return min(int(round(seconds / self.world.physics_dt)), most)
 
     def _delayed(self, action: List[float]) -> List[float]:
-        """Apply the configured action latency (whole control steps; 0 = none)."""
+        """Apply the configured action latency (whole control steps; 0 = none), the gripper's
+        apart from the arm's when ``randomisation.gripper_latency_steps`` draws it."""
+        if self._gripper_latency_steps is not None:
+            return self._delayed_apart(action)
         if self._latency_steps == 0:
             return action
         self._action_queue.append(action)
@@ -482,6 +488,20 @@ class FR5Env(gym.Env):
             # Until the first action arrives the arm holds and the gripper keeps its command.
             return [0.0] * (ACTION_SIZE - 1) + [self.shaper.gripper_action(self._gripper_command_width)]
         return self._action_queue.popleft()
+
+    def _delayed_apart(self, action: List[float]) -> List[float]:
+        """:meth:`_delayed` with the arm ``_latency_steps`` and the gripper
+        ``_gripper_latency_steps`` behind: the queue keeps the newest actions, newest last."""
+        arm, gripper = self._latency_steps, self._gripper_latency_steps
+        queue = self._action_queue
+        queue.append(action)
+        while len(queue) > max(arm, gripper) + 1:
+            queue.popleft()
+        # Until its first action arrives the arm holds and the gripper keeps its command.
+        arm_part = queue[-1 - arm][:ACTION_SIZE - 1] if len(queue) > arm else [0.0] * (ACTION_SIZE - 1)
+        gripper_part = (queue[-1 - gripper][ACTION_SIZE - 1] if len(queue) > gripper
+                        else self.shaper.gripper_action(self._gripper_command_width))
+        return [*arm_part, gripper_part]
 
     def task_state(self) -> TaskState:
         """Ground-truth state the task judges (also read by the scripted expert).
@@ -513,6 +533,16 @@ class FR5Env(gym.Env):
             tcp_in_workspace=x_low <= x <= x_high and y_low <= y <= y_high and z_low <= z <= z_high,
         )
 
+    def held_as_the_camera_sees(self, state: TaskState) -> bool:
+        """The object is in the hand as the detector's tracker decides it (then it is published
+        in the tcp frame, without the camera's delay): the fingers closed to about the object's
+        width, the tcp within 4 cm of its centre, the object lifted off its resting height.
+
+        :param state: :meth:`task_state` of this moment.
+        """
+        return (state.gripper_width <= 2.0 * self._object_dims[0] + 0.01
+                and state.tcp_to_object_distance <= 0.04 and state.object_position[2] > self._object_rest_z + 0.005)
+
     def _observe(self, measured_early: Optional[tuple] = None, sample_time: float = 0.0,
                  now: float = 0.0) -> Tuple[TaskState, np.ndarray]:
         """The task state now, and the observation: of the state now, or of the robot as
@@ -530,11 +560,9 @@ class FR5Env(gym.Env):
         if self._bridge is not None:
             width = self._bridge.observe(width, sample_time)
         if self._target is not None:
-            # In the hand as the detector's tracker decides it: fingers closed to about the
-            # object's width, the tcp near its centre.
-            in_hand = (state.gripper_width <= 2.0 * self._object_dims[0] + 0.01
-                       and state.tcp_to_object_distance <= 0.04 and state.object_position[2] > self._object_rest_z + 0.005)
-            object_position = self._target.observe(object_position, now, in_hand)
+            object_position = self._target.observe(
+                object_position, now, self.held_as_the_camera_sees(state),
+                state.tcp_to_object_distance <= self._target_hidden_radius)
         tcp_jacobian = None
         if self._obs_noise_std > 0.0:
             rng = self.np_random
@@ -632,3 +660,7 @@ class FR5Env(gym.Env):
             if rnd.target_action_latency_steps is not None:  # drawn only when set: configurations without it keep their episodes
                 lo, hi = rnd.target_action_latency_steps
                 self._latency_steps = int(rng.integers(lo, hi + 1))
+        self._gripper_latency_steps = None
+        if on and rnd.gripper_latency_steps is not None:  # drawn last, and only when set: the same reason
+            lo, hi = rnd.gripper_latency_steps
+            self._gripper_latency_steps = int(rng.integers(lo, hi + 1))

@@ -320,7 +320,8 @@ class DelayedTarget:
     ``latency`` after its capture and stands until the next one arrives. Before the first frame
     arrives the scene at the episode's start is seen (the simulator holds a new scene until a
     frame of it is through). Once the object is in the hand the detector's tracker publishes it
-    in the tcp frame, so it is seen without delay.
+    in the tcp frame, so it is seen without delay. A frame captured while the hand hides the
+    object shows where it was last seen (the tracker's hold): the target does not follow a push.
 
     :param latency: s from capture to the policy node.
     :param frame_period: s between two frames (1 / the camera's rate).
@@ -329,15 +330,18 @@ class DelayedTarget:
 
     def __init__(self, latency: float, frame_period: float, phase: float) -> None:
         self.latency, self.frame_period, self.phase = latency, frame_period, phase
-        self.history: deque = deque()  # (time s, position) of every period, oldest first
+        self.history: deque = deque()  # (time s, position, hidden) of every period, oldest first
+        self._last_seen: Optional[Sequence[float]] = None  # the newest capture that showed the object
 
-    def observe(self, position: Sequence[float], now: float, in_hand: bool) -> Sequence[float]:
+    def observe(self, position: Sequence[float], now: float, in_hand: bool, hidden: bool = False) -> Sequence[float]:
         """The position the policy sees at ``now`` (s since the episode's start).
 
         :param position: the object's true position now (m, base_link).
         :param in_hand: the object is held by the fingers (seen without delay).
+        :param hidden: the hand hides the object from the camera now (a frame captured now
+            shows where it was last seen).
         """
-        self.history.append((now, position))
+        self.history.append((now, position, hidden))
         if in_hand:
             return position
         newest_capture = now - self.latency
@@ -347,4 +351,8 @@ class DelayedTarget:
         # The position at the capture: the last period sampled at or before it.
         while len(self.history) > 1 and self.history[1][0] <= capture + 1e-9:
             self.history.popleft()
-        return self.history[0][1]
+        _, captured, captured_hidden = self.history[0]
+        if captured_hidden and self._last_seen is not None:
+            return self._last_seen
+        self._last_seen = captured
+        return captured
