@@ -103,3 +103,16 @@ def test_the_camera_target_arrives_one_latency_late_stamped_with_its_capture_and
         assert max(abs(r.value[0] - start[0]) for r in readings) < 1e-3
     finally:
         env.close()
+
+
+def test_compute_latencies_drawn_from_a_measured_record_set_when_each_command_acts():
+    """--compute-from: each period's command acts after a latency drawn from the measured ones
+    (in whole physics steps); without them, after the fixed --compute-ms."""
+    run, env = emulation("default")
+    try:
+        assert {run._compute_steps() for _ in range(20)} == {run.compute_steps}
+        run.compute_samples = np.array([0.0, 0.012, 0.04])
+        drawn = {run._compute_steps() for _ in range(200)}
+        assert drawn == {0, round(0.012 / run.physics_dt), round(0.04 / run.physics_dt)}
+    finally:
+        env.close()

@@ -3,6 +3,7 @@
     python tools/bench/timing.py [--model models/reach] [--episodes 600] [--seed 900000]
                                  [--profile fairino|default] [--compute-ms 2]
                                  [--finger-source ...] [--velocity-source ...] [--episode-start ...]
+                                 [--target simulator|camera] [--hidden-radius 0.15] [--compute-from FILE]
 
 A twenty-episode ROS run says little about a 90 % target: its confidence interval spans about
 70-97 %. This bench reproduces, physics step by physics step, what
@@ -38,11 +39,19 @@ the noise of a ROS run, so hundreds of episodes take a minute:
   judged every control period from the policy's first command, as the simulator does.
 
 ``--finger-source``, ``--velocity-source`` and ``--episode-start`` override one part of the
-profile, to see what each costs. Every episode draws its own phases. Writes
+profile, to see what each costs; ``--compute-from`` draws each command's latency from a measured
+record (docs/bench/timing_chain/compute_latency_whole_rehearsal_2026-11-26.json: the policy node
+through the whole rehearsal) instead of the fixed ``--compute-ms``.
+
+With ``--target camera`` this bench does **not** agree with the whole rehearsal through ROS: on
+the same seeds it put the shipped model and two others at 94-98 % where ROS gave 70-90 %, and it
+could not rank them (docs/experiments.md, "The whole rehearsal emulated"). Iterate on it behind
+the FAIRINO driver without the camera, and judge the camera chain through ROS. Every episode draws its own phases. Writes
 bench/results/timing_<task>_<profile>.json; ``rehearsal.py`` runs the same seeds through ROS.
 Target (issue #27): >= 90 % reach behind the FAIRINO profile.
 """
 import argparse
+import json
 import sys
 import xmlrpc.client
 from dataclasses import dataclass
@@ -144,7 +153,8 @@ class ChainEmulation:
 
     def __init__(self, env: FR5Env, step: DeploymentStep, chain: Chain, params: Dict[str, Any],
                  compute_s: float, rng: np.random.Generator, trained_velocity_source: str,
-                 hidden_radius: float = CAMERA_HIDDEN_RADIUS_M) -> None:
+                 hidden_radius: float = CAMERA_HIDDEN_RADIUS_M,
+                 compute_samples_s: Optional[Sequence[float]] = None) -> None:
         self.env, self.step, self.chain, self.rng = env, step, chain, rng
         self.robot = env.robot_spec
         self.physics_dt = float(params["physics_dt"])
@@ -154,6 +164,8 @@ class ChainEmulation:
         self.servo = ServoCycle(whole_multiple(1.0 / servo_rate, self.physics_dt) if servo_rate else 0,
                                 int(params["servo_delay_cycles"]), env.joint_positions())
         self.compute_steps = int(round(compute_s / self.physics_dt))
+        # Measured compute latencies (s) to draw each period's from, instead of the fixed one.
+        self.compute_samples = None if compute_samples_s is None else np.asarray(compute_samples_s, dtype=float)
         self.pause_steps = int(round(float(params["pause_between_episodes"]) / self.physics_dt))
         node = load_yaml(package_root() / "config" / "policy_node.yaml")
         guard = typed(MotionGuardSettings, node["guard"], "config/policy_node.yaml guard")
@@ -256,7 +268,7 @@ class ChainEmulation:
                 target = self._target(camera, now - episode_start_s)
                 result = step(StepInputs(now, self.reader.reading(), target, now, self.fault))
                 if isinstance(result, Command):
-                    pending.append((k + self.compute_steps, result.arm_positions, result.gripper_width,
+                    pending.append((k + self._compute_steps(), result.arm_positions, result.gripper_width,
                                     result.target_in_base is not None))
             while pending and pending[0][0] <= k:
                 _, arm_command, width, from_policy = pending.pop(0)
@@ -281,6 +293,13 @@ class ChainEmulation:
                             "steps": (k - first_command_step) // self.per_period, "start_move_s": round(start_move_s, 3)}
             if k * self.physics_dt > 120.0:
                 raise RuntimeError(f"seed {seed}: no verdict after 120 s of simulated time (start move stuck?)")
+
+    def _compute_steps(self) -> int:
+        """Physics steps from the period's start to the command acting: fixed, or drawn from
+        the measured latencies."""
+        if self.compute_samples is None:
+            return self.compute_steps
+        return int(round(float(self.rng.choice(self.compute_samples)) / self.physics_dt))
 
     def _target(self, camera: Optional[DelayedTarget], since_start_s: float) -> Reading:
         """The target the node has at this period: the simulator's, or the camera's (stamped
@@ -325,6 +344,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--hidden-radius", type=float, default=CAMERA_HIDDEN_RADIUS_M,
                         help=f"--target camera: m, tcp to object within which the hand hides it (default "
                              f"{CAMERA_HIDDEN_RADIUS_M}, measured through ROS; 0: always seen)")
+    parser.add_argument("--compute-from", type=Path, default=None,
+                        help="draw each period's compute latency from a ros_loop/rehearsal timing record (JSON with "
+                             "'compute_latency_s': [s, ...]) instead of --compute-ms")
     parser.add_argument("--results", type=Path, default=RESULTS_DIR)
     parser.add_argument("--name", default=None, help="result file stem (default timing_<task>_<profile>)")
     parser.add_argument("--map", type=Path, default=None,
@@ -347,8 +369,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                           target_workspace_margin=float(node_cfg["target_workspace_margin"]),
                           future_stamp_tolerance=float(node_cfg["future_stamp_tolerance"]),
                           guard=guard if chain.episode_start == "go_to_start" else None)
+    compute_samples = None
+    if args.compute_from is not None:
+        compute_samples = json.loads(args.compute_from.read_text())["compute_latency_s"]
     emulation = ChainEmulation(env, step, chain, params, args.compute_ms / 1000.0, np.random.default_rng(args.seed),
-                                trained.observation.joint_velocity_source, args.hidden_radius)
+                                trained.observation.joint_velocity_source, args.hidden_radius,
+                                compute_samples)
     records = [emulation.run_episode(args.seed + index) for index in range(args.episodes)]
     env.close()
     successes = sum(record["success"] for record in records)
