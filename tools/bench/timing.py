@@ -30,10 +30,10 @@ the noise of a ROS run, so hundreds of episodes take a minute:
   per episode from ``randomisation.target_latency_s`` (config/env.yaml: the vision bench's
   measured range) after its capture, stamped with its capture time; held where it was last seen
   while the tcp is within ``--hidden-radius`` of it (the hand hides it: the tracker's hold); in
-  the tcp frame, without delay, once the object is in the hand (``FR5Env.held_as_the_camera_sees``). The default
-  (``simulator``) is the simulator's own /target_pose, exact and at once. Rendering, the
-  detector's segmentation and its tracker are not emulated: compare with ``rehearsal.py
-  --chains fairino_vision`` before trusting it;
+  the tcp frame, without delay, once the object is in the hand
+  (``FR5Env.held_as_the_camera_sees``). The default (``simulator``) is the simulator's own
+  /target_pose, exact and at once. Rendering, the detector's segmentation and its tracker are
+  not emulated;
 - **episodes**: with ``episode_start: go_to_start`` the arm is not teleported: the cup is placed,
   the guard's start move brings the arm from where the last episode left it, and the episode is
   judged every control period from the policy's first command, as the simulator does.
@@ -41,13 +41,15 @@ the noise of a ROS run, so hundreds of episodes take a minute:
 ``--finger-source``, ``--velocity-source`` and ``--episode-start`` override one part of the
 profile, to see what each costs; ``--compute-from`` draws each command's latency from a measured
 record (docs/bench/timing_chain/compute_latency_whole_rehearsal_2026-11-26.json: the policy node
-through the whole rehearsal) instead of the fixed ``--compute-ms``.
+through the whole rehearsal) instead of the fixed ``--compute-ms``. Every episode draws its own
+phases. Writes bench/results/timing_<task>_<profile>.json; ``rehearsal.py`` runs the same seeds
+through ROS.
 
 With ``--target camera`` this bench does **not** agree with the whole rehearsal through ROS: on
-the same seeds it put the shipped model and two others at 94-98 % where ROS gave 70-90 %, and it
-could not rank them (docs/experiments.md, "The whole rehearsal emulated"). Iterate on it behind
-the FAIRINO driver without the camera, and judge the camera chain through ROS. Every episode draws its own phases. Writes
-bench/results/timing_<task>_<profile>.json; ``rehearsal.py`` runs the same seeds through ROS.
+the same seeds it put three grasp models at about 95 % (92.5-98 % per 200 episodes) where ROS
+gave them 70-89 %, and it could not rank them (docs/experiments.md, "The whole rehearsal
+emulated"). Iterate on it behind the FAIRINO driver without the camera, and judge the camera
+chain through ROS.
 Target (issue #27): >= 90 % reach behind the FAIRINO profile.
 """
 import argparse
@@ -80,7 +82,7 @@ from fr5_rl.training.success_map import write_success_map
 TARGET_SUCCESS = 0.9
 # m, tcp to cup centre: through the whole rehearsal (models/grasp, seeds 1020000-1020019) the
 # detector's first "hidden" came at 0.075-0.141 m and 99 % of its "seen" frames at >= 0.179 m
-# (docs/experiments.md, "The hand hides the cup").
+# (docs/experiments.md, "The whole rehearsal: where the knock-overs come from").
 CAMERA_HIDDEN_RADIUS_M = 0.15
 
 
