@@ -173,6 +173,28 @@ def test_gripper_latency_steps_delays_the_gripper_apart_from_the_arm(arm_steps, 
         FR5Env(task="grasp", config={"randomisation": {"gripper_latency_steps": [2, 1]}})
 
 
+@pytest.mark.parametrize("steps", [0, 1, 2])
+def test_gripper_latency_equal_to_the_arms_rolls_out_as_without_the_key(steps):
+    """gripper_latency_steps [L, L] with action_latency_steps [L, L]: the same episodes, bit for
+    bit, as the gripper sharing the arm's latency (a one-value range draws nothing)."""
+    perturbed = {"enabled": True, "plain_episode_share": 0.0, "action_latency_steps": [steps, steps]}
+    shared = FR5Env(task="grasp", config={"randomisation": perturbed})
+    apart = FR5Env(task="grasp", config={"randomisation": {**perturbed, "gripper_latency_steps": [steps, steps]}})
+    actions = np.random.default_rng(4).uniform(-1, 1, (120, 7)).astype(np.float32)
+    try:
+        for env in (shared, apart):
+            env.reset(seed=11)
+        for action in actions:
+            obs_shared, reward_shared, *_ = shared.step(action)
+            obs_apart, reward_apart, *_ = apart.step(action)
+            np.testing.assert_array_equal(obs_shared, obs_apart)
+            assert reward_shared == reward_apart
+        assert apart._gripper_latency_steps == steps and shared._gripper_latency_steps is None
+    finally:
+        shared.close()
+        apart.close()
+
+
 def test_timing_share_leaves_some_perturbed_episodes_with_whole_step_latency_only():
     """randomisation.timing_share: that share of the perturbed episodes gets the in-period timing
     (command delay, observation age); the others keep their latency but no timing, so that "no

@@ -181,6 +181,30 @@ def test_a_frame_captured_while_the_hand_hides_the_object_shows_where_it_was_las
     # Hidden from the first capture on: nothing was seen yet, so the hidden frame is all there is.
     first = DelayedTarget(latency=0.0, frame_period=0.02, phase=0.0)
     assert first.observe((1.0, 0.0, 0.0), 0.0, in_hand=False, hidden=True)[0] == 1.0
+    assert first.observe((2.0, 0.0, 0.0), 0.02, in_hand=False, hidden=True)[0] == 1.0
+    # Out of the hand under it (a slip): held where the hand had it, not where it stood before.
+    slip = DelayedTarget(latency=0.0, frame_period=0.02, phase=0.0)
+    slip.observe((1.0, 0.0, 0.0), 0.0, in_hand=False)
+    assert slip.observe((1.0, 0.0, 0.3), 0.02, in_hand=True, hidden=True)[2] == 0.3
+    assert slip.observe((1.5, 0.0, 0.0), 0.04, in_hand=False, hidden=True)[2] == 0.3
+
+
+def test_the_camera_target_says_when_what_it_returned_was_captured():
+    from fr5_rl.observation import DelayedTarget
+
+    period, phase, latency = 1.0 / 15.0, 0.01, 0.1
+    target = DelayedTarget(latency=latency, frame_period=period, phase=phase)
+    for k in range(40):
+        now = 0.02 * k
+        target.observe((now, 0.0, 0.0), now, in_hand=False)
+        if now - latency < phase:
+            assert target.seen_at == 0.0  # the scene at the episode's start
+        else:
+            expected = phase + ((now - latency - phase + 1e-9) // period) * period
+            assert target.seen_at == pytest.approx(expected)
+            assert now - latency - period < target.seen_at <= now - latency + 1e-9
+    target.observe((9.0, 0.0, 0.0), 0.9, in_hand=True)
+    assert target.seen_at == 0.9
 
 
 def test_the_environment_holds_the_target_while_the_tcp_is_within_the_hidden_radius():

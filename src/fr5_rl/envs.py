@@ -661,6 +661,6 @@ class FR5Env(gym.Env):
                 lo, hi = rnd.target_action_latency_steps
                 self._latency_steps = int(rng.integers(lo, hi + 1))
         self._gripper_latency_steps = None
-        if on and rnd.gripper_latency_steps is not None:  # drawn last, and only when set: the same reason
+        if on and rnd.gripper_latency_steps is not None:  # drawn only when set: configurations without it keep their episodes
             lo, hi = rnd.gripper_latency_steps
             self._gripper_latency_steps = int(rng.integers(lo, hi + 1))

@@ -321,7 +321,9 @@ class DelayedTarget:
     arrives the scene at the episode's start is seen (the simulator holds a new scene until a
     frame of it is through). Once the object is in the hand the detector's tracker publishes it
     in the tcp frame, so it is seen without delay. A frame captured while the hand hides the
-    object shows where it was last seen (the tracker's hold): the target does not follow a push.
+    object shows where it was last seen, in a frame or in the hand (the tracker's hold): the
+    target does not follow a push (the tracker's search for a hidden object nudged up to
+    ``nudge_radius``, which keeps its track, is not modelled).
 
     :param latency: s from capture to the policy node.
     :param frame_period: s between two frames (1 / the camera's rate).
@@ -331,7 +333,8 @@ class DelayedTarget:
     def __init__(self, latency: float, frame_period: float, phase: float) -> None:
         self.latency, self.frame_period, self.phase = latency, frame_period, phase
         self.history: deque = deque()  # (time s, position, hidden) of every period, oldest first
-        self._last_seen: Optional[Sequence[float]] = None  # the newest capture that showed the object
+        self._last_seen: Optional[Sequence[float]] = None  # the newest position seen, in a frame or in the hand
+        self.seen_at = 0.0  # s since the episode's start: when what observe() returned was captured
 
     def observe(self, position: Sequence[float], now: float, in_hand: bool, hidden: bool = False) -> Sequence[float]:
         """The position the policy sees at ``now`` (s since the episode's start).
@@ -343,15 +346,18 @@ class DelayedTarget:
         """
         self.history.append((now, position, hidden))
         if in_hand:
+            self._last_seen, self.seen_at = position, now
             return position
         newest_capture = now - self.latency
         if newest_capture < self.phase:
+            self.seen_at = self.history[0][0]
             return self.history[0][1]
         capture = self.phase + math.floor((newest_capture - self.phase) / self.frame_period + 1e-9) * self.frame_period
         # The position at the capture: the last period sampled at or before it.
         while len(self.history) > 1 and self.history[1][0] <= capture + 1e-9:
             self.history.popleft()
         _, captured, captured_hidden = self.history[0]
+        self.seen_at = capture
         if captured_hidden and self._last_seen is not None:
             return self._last_seen
         self._last_seen = captured

@@ -46,8 +46,8 @@ phases. Writes bench/results/timing_<task>_<profile>.json; ``rehearsal.py`` runs
 through ROS.
 
 With ``--target camera`` this bench does **not** agree with the whole rehearsal through ROS: on
-the same seeds it put three grasp models at about 95 % (92.5-98 % per 200 episodes) where ROS
-gave them 70-89 %, and it could not rank them (docs/experiments.md, "The whole rehearsal
+seeds 1020000+ it put three grasp models at about 95 % (92.5-98 % per 200 episodes) where ROS
+gave them 70-95 %, and it could not rank them (docs/experiments.md, "The whole rehearsal
 emulated"). Iterate on it behind the FAIRINO driver without the camera, and judge the camera
 chain through ROS.
 Target (issue #27): >= 90 % reach behind the FAIRINO profile.
@@ -313,7 +313,7 @@ class ChainEmulation:
         held = self.env.held_as_the_camera_sees(state)
         position = camera.observe(state.object_position, since_start_s, held,
                                   state.tcp_to_object_distance <= self.hidden_radius)
-        return Reading(tuple(position), now, stamp=now if held else now - camera.latency)
+        return Reading(tuple(position), now, stamp=now - since_start_s + camera.seen_at)
 
     def _pause(self, arm_command: Optional[Sequence[float]]) -> None:
         """The simulator's pause between episodes: the arm holds where it ended, the fingers as commanded."""
@@ -347,8 +347,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         help=f"--target camera: m, tcp to object within which the hand hides it (default "
                              f"{CAMERA_HIDDEN_RADIUS_M}, measured through ROS; 0: always seen)")
     parser.add_argument("--compute-from", type=Path, default=None,
-                        help="draw each period's compute latency from a ros_loop/rehearsal timing record (JSON with "
-                             "'compute_latency_s': [s, ...]) instead of --compute-ms")
+                        help="draw each period's compute latency from a JSON file with 'compute_latency_s': [s, ...] "
+                             "(the policy node's ~timing, e.g. docs/bench/timing_chain/"
+                             "compute_latency_whole_rehearsal_2026-11-26.json) instead of --compute-ms")
     parser.add_argument("--results", type=Path, default=RESULTS_DIR)
     parser.add_argument("--name", default=None, help="result file stem (default timing_<task>_<profile>)")
     parser.add_argument("--map", type=Path, default=None,
@@ -392,7 +393,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     name = args.name or f"timing_{task}_{args.profile}"
     out = args.results / f"{name}.json"
     write_result(out, {"model": relative_path(model_dir), "profile": args.profile, "simulator": params,
-                       "chain": chain.__dict__, "compute_ms": args.compute_ms,
+                       "chain": chain.__dict__,
+                       "compute_ms": None if compute_samples is not None else args.compute_ms,
+                       "compute_from": None if args.compute_from is None else relative_path(args.compute_from),
                        "hidden_radius_m": args.hidden_radius if chain.target == "camera" else None, "episodes": len(records),
                        "seed": args.seed, "successes": successes, "success_rate": rate, "success_ci95": [low, high],
                        "failures": failures, "records": records}, verdicts)
