@@ -477,22 +477,13 @@ class FR5Env(gym.Env):
         return min(int(round(seconds / self.world.physics_dt)), most)
 
     def _delayed(self, action: List[float]) -> List[float]:
-        """Apply the configured action latency (whole control steps; 0 = none), the gripper's
-        apart from the arm's when ``randomisation.gripper_latency_steps`` draws it."""
-        if self._gripper_latency_steps is not None:
-            return self._delayed_apart(action)
-        if self._latency_steps == 0:
+        """Apply the configured action latency (whole control steps; 0 = none): the arm
+        ``_latency_steps`` behind, the gripper ``_gripper_latency_steps`` (None: the arm's). The
+        queue keeps the newest actions, newest last."""
+        arm = self._latency_steps
+        gripper = arm if self._gripper_latency_steps is None else self._gripper_latency_steps
+        if arm == gripper == 0:
             return action
-        self._action_queue.append(action)
-        if len(self._action_queue) <= self._latency_steps:
-            # Until the first action arrives the arm holds and the gripper keeps its command.
-            return [0.0] * (ACTION_SIZE - 1) + [self.shaper.gripper_action(self._gripper_command_width)]
-        return self._action_queue.popleft()
-
-    def _delayed_apart(self, action: List[float]) -> List[float]:
-        """:meth:`_delayed` with the arm ``_latency_steps`` and the gripper
-        ``_gripper_latency_steps`` behind: the queue keeps the newest actions, newest last."""
-        arm, gripper = self._latency_steps, self._gripper_latency_steps
         queue = self._action_queue
         queue.append(action)
         while len(queue) > max(arm, gripper) + 1:
