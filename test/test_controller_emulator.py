@@ -84,13 +84,17 @@ def test_port_zero_picks_a_free_port_and_stop_makes_it_unreachable(emulate):
 
 
 def test_a_move_before_activation_is_refused(emulate):
-    emulator, _, rpc = emulate([6])
+    emulator, clock, rpc = emulate([6])
     assert rpc.MoveGripper(1, 50, 50, 50, 30000, 1) == ERR_NOT_ACTIVATED
     assert emulator.commanded_width() is None  # nothing moved
     activate(rpc)
     assert emulator.is_activated() and rpc.GetGripperActivateStatus() == [0, 0, 1]
+    assert emulator.newest_command() is None
+    clock.advance(1.5)
     assert rpc.MoveGripper(1, 50, 50, 50, 30000, 1) == 0
     assert emulator.commanded_width() == pytest.approx(0.04)
+    # When it arrived, on the simulator's clock: a late simulator applies it from then on.
+    assert emulator.newest_command() == (pytest.approx(clock.now), pytest.approx(0.04))
     assert rpc.ActGripper(1, 0) == 0  # a reset deactivates
     assert rpc.MoveGripper(1, 20, 50, 50, 30000, 1) == ERR_NOT_ACTIVATED
     assert emulator.commanded_width() == pytest.approx(0.04)

@@ -2,7 +2,7 @@
 simulator node's real-time loop (verdicts, publications, camera frames)."""
 import pytest
 
-from fr5_rl.sim.pacing import AlignedStepSchedule, StepSchedule, TimeSchedule, WallClockPacer
+from fr5_rl.sim.pacing import AlignedStepSchedule, ArrivalQueue, StepSchedule, TimeSchedule, WallClockPacer
 
 
 class FakeClock:
@@ -77,3 +77,28 @@ def test_a_late_loop_still_knows_when_each_step_was_true_on_the_wall_clock():
     times = [pacer.wall_time for _ in pacer.due_steps()]
     assert times == pytest.approx([100.01, 100.02, 100.03])
     assert pacer.wall_time - 0.01 == pytest.approx(100.02)  # the last step began at 20 ms
+
+
+
+def test_a_late_loop_takes_each_command_up_at_its_arrival_not_at_its_wake_up():
+    # The loop wakes 40 ms late; gripper commands arrived 5 and 15 ms in, and one 35 ms in. Catching
+    # up, each step runs with the newest command that had arrived when it began: applied at the
+    # wake-up instead, the fingers would lead the arm by the loop's lateness.
+    clock = FakeClock()
+    pacer = WallClockPacer(physics_dt=0.01, max_catch_up=10, clock=clock)
+    gripper = ArrivalQueue()
+    for arrived, width in ((100.005, 0.06), (100.015, 0.04), (100.035, 0.0)):
+        gripper.push(arrived, width)
+    clock.now += 0.04
+    applied, width = [], 0.08
+    for _ in pacer.due_steps():
+        taken = gripper.due(pacer.wall_time - pacer.physics_dt)  # the step's start
+        width = width if taken is None else taken
+        applied.append(width)
+    assert applied == [0.08, 0.06, 0.04, 0.04]  # steps beginning at 0, 10, 20 and 30 ms
+    assert len(gripper) == 1  # the 35 ms command waits for the step that begins after it
+    clock.now += 0.01
+    assert [gripper.due(pacer.wall_time - pacer.physics_dt) for _ in pacer.due_steps()] == [0.0]
+    gripper.push(100.05, 0.08)
+    gripper.clear()
+    assert gripper.due(200.0) is None and len(gripper) == 0

@@ -61,7 +61,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ..config import ConfigError, check_positive, check_time_constants, whole_multiple
 from ..envs import EpisodeVerdict, FR5Env, JointStates
 from ..sim.controller_emulator import ControllerEmulator, ControllerEmulatorSettings
-from ..sim.pacing import AlignedStepSchedule, StepSchedule, TimeSchedule, WallClockPacer
+from ..sim.pacing import AlignedStepSchedule, ArrivalQueue, StepSchedule, TimeSchedule, WallClockPacer
 from ..sim.servo import FirstOrderResponse, ServoCycle
 from ..transforms import load_static_transforms, matrix_from_quaternion, quaternion_from_matrix, transform_in
 from .params import exit_if_help_asked, node_parameters
@@ -198,8 +198,12 @@ class SimulatorNode:
         self.late_periods = 0  # lockstep: periods of this episode that went without a command
         self.arm_command: Optional[Tuple[float, ...]] = None  # newest arm command (rad), None: none yet
         # Real time: commands with their arrival (monotonic s), taken up by the physics step that
-        # runs at that time; a loop catching up on late steps must not apply them early.
-        self.arriving: deque = deque()
+        # runs at that time; a loop catching up on late steps must not apply them early. The
+        # gripper's too: applied at the loop's wake-up, a late loop closed the fingers ahead of
+        # the arm by its lateness.
+        self.arriving: ArrivalQueue = ArrivalQueue()
+        self.gripper_arriving: ArrivalQueue = ArrivalQueue()
+        self.controller_command_at: Optional[float] = None  # arrival of the controller's newest command taken
         self.gripper_target = self.spec.max_opening_width
         self.commanded = False  # episodes are timed from the first command
         self.holding = True  # between episodes: commands are ignored until the next one starts
@@ -267,11 +271,15 @@ class SimulatorNode:
                     else:
                         self._start_episode(settle=params.reset_settle_time)
                 if self.controller is not None:
-                    self._follow_controller()
+                    self._take_controller_command()
                 for step in pacer.due_steps():
                     step_start = pacer.wall_time - self.physics_dt
-                    while self.arriving and self.arriving[0][0] <= step_start:
-                        self.arm_command = self.arriving.popleft()[1]
+                    arm_command = self.arriving.due(step_start)
+                    if arm_command is not None:
+                        self.arm_command = arm_command
+                    gripper_target = self.gripper_arriving.due(step_start)
+                    if gripper_target is not None:
+                        self.gripper_target = gripper_target
                     env.advance_physics(self.response.targets_for_step(self.servo.targets_for_step(self.arm_command)),
                                         self.gripper_target)
                     if not self.commanded:
@@ -281,6 +289,8 @@ class SimulatorNode:
                         if verdict.ended:
                             self._finish_episode(verdict, pacer.sim_time)
                         self.tcp_path.append(tuple(env.tcp_position()))
+                if self.controller is not None:
+                    self._report_to_controller()
                 if publish.due(pacer.step):
                     # Stamped when the state was true (a driver stamps its read), not when a
                     # late loop got to publish it: replays and velocity estimates need the former.
@@ -398,6 +408,8 @@ class SimulatorNode:
             self.env.reset(seed=self.params.seed + self.episode)
         self.arm_command = None
         self.arriving.clear()
+        self.gripper_arriving.clear()
+        self.controller_command_at = None  # the controller's standing command applies anew
         # A driver's servo loop runs on across episodes: its cycle keeps its phase.
         self.servo.reset(self.env.joint_positions(), restart_cycle=False)
         self.response.reset(self.env.joint_positions())
@@ -435,16 +447,23 @@ class SimulatorNode:
             rospy.logwarn_throttle(30.0, f"sim_node: could not reset the policy node through "
                                          f"{self.params.policy_reset_service}: {error}")
 
-    def _follow_controller(self) -> None:
-        """gripper_interface xmlrpc (lock held): the fingers take the width the emulated controller
-        was given, and it reads back what they measure."""
-        width = self.controller.commanded_width()
-        if width is not None and not self.holding:
-            self.gripper_target = float(np.clip(width, 0.0, self.spec.max_opening_width))
+    def _take_controller_command(self) -> None:
+        """gripper_interface xmlrpc (lock held): the width the emulated controller was given, for
+        the fingers to take from when it arrived."""
+        command = self.controller.newest_command()
+        if command is None or self.holding or command[0] == self.controller_command_at:
+            return
+        self.controller_command_at = command[0]
+        if not self.holding:
+            self.gripper_arriving.push(command[0], float(np.clip(command[1], 0.0, self.spec.max_opening_width)))
+
+    def _report_to_controller(self) -> None:
+        """gripper_interface xmlrpc (lock held): what the fingers measure now, for the controller to
+        read back; still moving while a command waits to be taken up."""
         states = self.env.joint_states()
         arm = len(self.spec.joint_names)
-        self.controller.set_measured_width(sum(states.positions[arm:]),
-                                           moving=any(abs(speed) > 1e-3 for speed in states.velocities[arm:]))
+        moving = len(self.gripper_arriving) > 0 or any(abs(speed) > 1e-3 for speed in states.velocities[arm:])
+        self.controller.set_measured_width(sum(states.positions[arm:]), moving=moving)
 
     def _reset_policy_then_start(self, start: int) -> None:
         """Real time (a thread of its own): the policy node's ~reset, which answers at once, or
@@ -491,6 +510,7 @@ class SimulatorNode:
         self.hold_until = time.monotonic() + self.params.pause_between_episodes
         self.arm_command = tuple(self.env.joint_positions())
         self.arriving.clear()
+        self.gripper_arriving.clear()
 
     # ------------------------------------------------------------------ callbacks
     def _on_arm_command(self, message: Float64MultiArray) -> None:
@@ -513,7 +533,7 @@ class SimulatorNode:
                 if self.params.lockstep:
                     self.arm_command = tuple(clamped.tolist())
                 else:
-                    self.arriving.append((time.monotonic(), tuple(clamped.tolist())))
+                    self.arriving.push(time.monotonic(), tuple(clamped.tolist()))
             self.new_command = True
             self.command_arrived.notify_all()
 
@@ -524,7 +544,11 @@ class SimulatorNode:
             return
         with self.lock:
             if not self.holding:
-                self.gripper_target = float(np.clip(width, 0.0, self.spec.max_opening_width))
+                width = float(np.clip(width, 0.0, self.spec.max_opening_width))
+                if self.params.lockstep:
+                    self.gripper_target = width
+                else:
+                    self.gripper_arriving.push(time.monotonic(), width)
             self.new_gripper_command = True
             self.command_arrived.notify_all()
 
@@ -543,6 +567,7 @@ class SimulatorNode:
                 env.hold_object(load_calibration_settings().simulator.object_in_tcp)
                 self.calibrating = True
                 self.arriving.clear()
+                self.gripper_arriving.clear()
                 self.holding = self.settling = self.positioning = False
                 self.arm_command = tuple(env.joint_positions())
                 self.gripper_target = float(env.scene().object_size[0])  # closed on the cup

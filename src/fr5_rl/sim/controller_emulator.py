@@ -97,6 +97,7 @@ class ControllerEmulator:
         self.fault = 0
         self.tool_do = [0, 0]
         self.commanded: Optional[float] = None  # m
+        self.commanded_at = 0.0  # s (clock) the newest command arrived
         self.measured: Optional[float] = None  # m
         self.last_move_at: Optional[float] = None
         # Motion done: each command gets a number; it is done once the simulator, having read
@@ -130,9 +131,19 @@ class ControllerEmulator:
 
         Calling it marks the newest command as seen by the simulator (see :meth:`set_measured_width`).
         """
+        command = self.newest_command()
+        return None if command is None else command[1]
+
+    def newest_command(self) -> Optional[Tuple[float, float]]:
+        """``(when, width)``: the newest command's arrival (s, this emulator's clock) and the
+        opening width it asks for (m); None before the first command. A simulator that catches
+        up on late physics steps applies it from its arrival on, not from when it looked.
+
+        Calling it marks the newest command as seen by the simulator (see :meth:`set_measured_width`).
+        """
         with self.lock:
             self.seen_seq = self.command_seq
-            return self.commanded
+            return None if self.commanded is None else (self.commanded_at, self.commanded)
 
     def set_measured_width(self, width_m: float, moving: bool) -> None:
         """What the simulated fingers measure, for ``GetGripperCurPosition`` and ``GetGripperMotionDone``.
@@ -243,6 +254,7 @@ class ControllerEmulator:
     # ------------------------------------------------------------------ helpers (lock held)
     def _command(self, width: float) -> None:
         self.commanded = width
+        self.commanded_at = self.clock()
         self.command_seq += 1
 
     # The percent <-> width conventions below are the controller's, written apart from the bridge's

@@ -8,7 +8,10 @@ The clock is injected, so all of it is tested without sleeping.
 from __future__ import annotations
 
 import time
-from typing import Callable, Iterator
+from collections import deque
+from typing import Callable, Deque, Generic, Iterator, Optional, Tuple, TypeVar
+
+T = TypeVar("T")
 
 
 class WallClockPacer:
@@ -55,6 +58,38 @@ class WallClockPacer:
         lag = wall - self.sim_time
         if lag > self.max_lag:  # hopelessly behind: resynchronise rather than race
             self._start += lag
+
+
+class ArrivalQueue(Generic[T]):
+    """Commands kept with their arrival time, each taken up by the first physics step that runs
+    at or after it: a loop catching up on late steps must not apply a command in simulated time
+    before it arrived in reality. Arm and gripper commands go through one, so that a late loop
+    cannot make the fingers lead the arm.
+    """
+
+    def __init__(self) -> None:
+        self._pending: Deque[Tuple[float, T]] = deque()
+
+    def push(self, arrived: float, command: T) -> None:
+        """:param arrived: wall-clock time (s, the pacer's clock) the command arrived.
+        :param command: the command, whatever the caller applies."""
+        self._pending.append((arrived, command))
+
+    def due(self, step_start: float) -> Optional[T]:
+        """The newest command that arrived at or before ``step_start`` (s, the pacer's clock; the
+        others before it are dropped, superseded), or None when none is due."""
+        command = None
+        pending = self._pending
+        while pending and pending[0][0] <= step_start:
+            command = pending.popleft()[1]
+        return command
+
+    def clear(self) -> None:
+        """Forget every command not yet taken up (a reset, a hold)."""
+        self._pending.clear()
+
+    def __len__(self) -> int:
+        return len(self._pending)
 
 
 class StepSchedule:
