@@ -102,3 +102,14 @@ def test_a_late_loop_takes_each_command_up_at_its_arrival_not_at_its_wake_up():
     gripper.push(100.05, 0.08)
     gripper.clear()
     assert gripper.due(200.0) is None and len(gripper) == 0
+
+
+def test_lateness_is_the_time_a_late_wake_has_to_catch_up_on():
+    clock = FakeClock()
+    pacer = WallClockPacer(physics_dt=0.01, max_catch_up=2, clock=clock)
+    clock.now += 0.035
+    assert pacer.lateness() == pytest.approx(0.035)
+    list(pacer.due_steps())  # two steps at most
+    assert pacer.lateness() == pytest.approx(0.015)
+    list(pacer.due_steps())
+    assert pacer.lateness() == pytest.approx(0.005)

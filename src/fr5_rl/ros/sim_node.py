@@ -196,6 +196,7 @@ class SimulatorNode:
         self.results: List[bool] = []  # success of each finished episode
         self.tcp_path: deque = deque(maxlen=300)  # tcp positions (m, base_link), one per control period
         self.late_periods = 0  # lockstep: periods of this episode that went without a command
+        self.loop_lateness: List[float] = []  # real time: s behind the wall clock at each wake-up, this episode
         self.arm_command: Optional[Tuple[float, ...]] = None  # newest arm command (rad), None: none yet
         # Real time: commands with their arrival (monotonic s), taken up by the physics step that
         # runs at that time; a loop catching up on late steps must not apply them early. The
@@ -272,6 +273,8 @@ class SimulatorNode:
                         self._start_episode(settle=params.reset_settle_time)
                 if self.controller is not None:
                     self._take_controller_command()
+                if not self.holding:
+                    self.loop_lateness.append(pacer.lateness())
                 for step in pacer.due_steps():
                     step_start = pacer.wall_time - self.physics_dt
                     arm_command = self.arriving.due(step_start)
@@ -416,6 +419,7 @@ class SimulatorNode:
         self.gripper_target = self.spec.max_opening_width
         self.commanded = False  # episodes are timed from the first command
         self.late_periods = 0
+        self.loop_lateness = []
         self.tcp_path.clear()
         if settle > 0.0:
             # A camera in the loop delivers the new scene a pipeline latency later: until then
@@ -499,6 +503,12 @@ class SimulatorNode:
                   "hold_s": self.params.pause_between_episodes + self.params.reset_settle_time}
         if self.params.lockstep:
             record["late_periods"] = self.late_periods
+        elif self.loop_lateness:
+            # A loaded machine wakes this loop late; the steps it then catches up on run with the
+            # commands of their time, but the policy reads states that much older.
+            late_ms = np.percentile(self.loop_lateness, [50, 99, 100]) * 1000.0
+            record["loop_late_ms"] = {"p50": round(float(late_ms[0]), 1), "p99": round(float(late_ms[1]), 1),
+                                      "max": round(float(late_ms[2]), 1)}
         self.outcome_pub.publish(String(data=json.dumps(record)))
         if self.outcome_log is not None:
             with self.outcome_log.open("a") as log:

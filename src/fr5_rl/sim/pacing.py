@@ -45,6 +45,11 @@ class WallClockPacer:
         step left it: what a driver stamps the state it read with, however late the loop ran."""
         return self._start + self.sim_time
 
+    def lateness(self) -> float:
+        """How far (s) the simulation is behind the wall clock now: the time a loop that woke late
+        has to catch up on (0 to one physics step when on time)."""
+        return self._clock() - self._start - self.sim_time
+
     def due_steps(self) -> Iterator[int]:
         """The physics steps the wall clock says are due now, each yielded after it is counted
         (the caller runs it): a command then acts as long in simulation as it did in reality,
