@@ -204,7 +204,7 @@ class SimulatorNode:
         # the arm by its lateness.
         self.arriving: ArrivalQueue = ArrivalQueue()
         self.gripper_arriving: ArrivalQueue = ArrivalQueue()
-        self.controller_command_at: Optional[float] = None  # arrival of the controller's newest command taken
+        self.controller_command: Optional[Tuple[float, float]] = None  # the controller's newest command taken
         self.gripper_target = self.spec.max_opening_width
         self.commanded = False  # episodes are timed from the first command
         self.holding = True  # between episodes: commands are ignored until the next one starts
@@ -412,7 +412,7 @@ class SimulatorNode:
         self.arm_command = None
         self.arriving.clear()
         self.gripper_arriving.clear()
-        self.controller_command_at = None  # the controller's standing command applies anew
+        self.controller_command = None  # the controller's standing command applies anew
         # A driver's servo loop runs on across episodes: its cycle keeps its phase.
         self.servo.reset(self.env.joint_positions(), restart_cycle=False)
         self.response.reset(self.env.joint_positions())
@@ -455,11 +455,11 @@ class SimulatorNode:
         """gripper_interface xmlrpc (lock held): the width the emulated controller was given, for
         the fingers to take from when it arrived."""
         command = self.controller.newest_command()
-        if command is None or self.holding or command[0] == self.controller_command_at:
+        if command is None or self.holding or command == self.controller_command:
             return
-        self.controller_command_at = command[0]
-        if not self.holding:
-            self.gripper_arriving.push(command[0], float(np.clip(command[1], 0.0, self.spec.max_opening_width)))
+        self.controller_command = command
+        arrived, width = command
+        self.gripper_arriving.push(arrived, float(np.clip(width, 0.0, self.spec.max_opening_width)))
 
     def _report_to_controller(self) -> None:
         """gripper_interface xmlrpc (lock held): what the fingers measure now, for the controller to
