@@ -2,7 +2,8 @@
 
 :class:`WallClockPacer` keeps simulated time, counted in whole physics steps, locked to a wall
 clock; :class:`StepSchedule`, :class:`AlignedStepSchedule` and :class:`TimeSchedule` say when
-something periodic (a verdict, a publication, a camera frame) is due on that simulated time.
+something periodic (a verdict, a publication, a camera frame) is due on that simulated time;
+:class:`ArrivalQueue` gives each physics step the commands that had arrived when it began.
 The clock is injected, so all of it is tested without sleeping.
 """
 from __future__ import annotations
