@@ -45,11 +45,11 @@ through the whole rehearsal) instead of the fixed ``--compute-ms``. Every episod
 phases. Writes bench/results/timing_<task>_<profile>.json; ``rehearsal.py`` runs the same seeds
 through ROS.
 
-With ``--target camera`` this bench does **not** agree with the whole rehearsal through ROS: on
-seeds 1020000+ it put three grasp models at about 95 % (92.5-98 % per 200 episodes) where ROS
-gave them 70-95 %, and it could not rank them (docs/experiments.md, "The whole rehearsal
-emulated"). Iterate on it behind the FAIRINO driver without the camera, and judge the camera
-chain through ROS.
+With ``--target camera`` this bench agrees with the whole rehearsal through ROS only in part.
+Before the simulator node took gripper commands up at their arrival, it put three grasp models at
+about 95 % on seeds 1020000+ where ROS gave them 70-95 %. Since, on the same 60 seeds it was
+within 2 episodes of ROS for chains 5 and 10 and 6 above it for chain 6 (docs/experiments.md,
+"The simulator closed the fingers early"). Iterate on it, and judge the camera chain through ROS.
 Target (issue #27): >= 90 % reach behind the FAIRINO profile.
 """
 import argparse
