@@ -14,7 +14,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools" / "bench
 import timing  # noqa: E402
 from fr5_rl.config import load_robot_spec, load_yaml, package_root, typed  # noqa: E402
 from fr5_rl.deploy.deployment import DeploymentStep  # noqa: E402
-from fr5_rl.deploy.motion_guard import MotionGuardSettings  # noqa: E402
+from fr5_rl.motion_guard import MotionGuardSettings  # noqa: E402
 from fr5_rl.deploy.policy import load_policy  # noqa: E402
 from fr5_rl.env_config import load_env_config  # noqa: E402
 from fr5_rl.envs import FR5Env  # noqa: E402

@@ -10,7 +10,7 @@ import pytest
 from fr5_rl.config import ConfigError, load_robot_spec, load_yaml, typed
 from fr5_rl.ros.calibration_motion import CalibrationMove, calibration_poses
 from fr5_rl.deploy.deployment import SafetyZone
-from fr5_rl.deploy.motion_guard import MotionGuardSettings
+from fr5_rl.motion_guard import MotionGuardSettings
 from fr5_rl.env_config import load_env_config
 from fr5_rl.perception.camera_model import Intrinsics
 from fr5_rl.perception.hand_eye import (CalibrationRefused, calibrated_transforms_yaml, check_pose_set,

@@ -1,4 +1,4 @@
-"""What the real arm adds around the policy (fr5_rl.deploy.motion_guard, the joint-state reader):
+"""What the real arm adds around the policy (fr5_rl.motion_guard, the joint-state reader):
 the slow start move and its refusal, the ramp-in, the joint-limit margin, the gripper-fault hold,
 glitch holds, and velocities estimated from positions the same way in the node and the
 environment."""
@@ -10,7 +10,7 @@ import pytest
 from fr5_rl.config import ConfigError, load_yaml, typed
 from fr5_rl.deploy.deployment import Command, Hold, HoldReason, StepInputs
 from fr5_rl.deploy.joint_state import JointStateReader
-from fr5_rl.deploy.motion_guard import MotionGuardSettings, StartPhase
+from fr5_rl.motion_guard import MotionGuardSettings, StartPhase
 from fr5_rl.envs import FR5Env
 from fr5_rl.deploy.deployment import DeploymentStep
 from fr5_rl.deploy.joint_state import Reading

@@ -193,6 +193,8 @@ class RandomisationConfig:
     timing_share: float
     plain_episode_share: float
     gripper_bridge_share: float
+    gripper_bridge_emulation: bool  # the bridge node's own code against the emulated controller, not BridgedGripper
+    guard_share: float  # share of episodes whose commands the policy node's motion guard limits
     target_share: float
     target_action_latency_steps: Optional[List[int]]  # inclusive range in the target's episodes, None: action_latency_steps
     target_latency_s: List[float]
@@ -219,6 +221,8 @@ class RandomisationConfig:
                 raise ConfigError(f"randomisation.{key}: {steps} must be [low, high] whole steps with 0 <= low <= high")
         if not 0.0 <= self.gripper_bridge_share <= 1.0:
             raise ConfigError(f"randomisation.gripper_bridge_share: {self.gripper_bridge_share} must be in [0, 1]")
+        if not 0.0 <= self.guard_share <= 1.0:
+            raise ConfigError(f"randomisation.guard_share: {self.guard_share} must be in [0, 1]")
         if not 0.0 <= self.plain_episode_share < 1.0:
             raise ConfigError(f"randomisation.plain_episode_share: {self.plain_episode_share} must be in [0, 1)")
         if not 0.0 <= self.timing_share <= 1.0:

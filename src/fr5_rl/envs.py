@@ -25,6 +25,8 @@ from .config import load_robot_spec
 from .env_config import EnvConfig, load_env_config
 from .control import ACTION_SIZE, JointCommandShaper, finite_values
 from .gripper import BridgedGripper, load_bridge_timing
+from .sim.gripper_chain import EmulatedGripperChain
+from .motion_guard import MotionGuard, load_guard_settings
 from .kinematics import ForwardKinematics
 from .observation import ActionHistory, DelayedTarget, ObservationBuilder, velocity_from_positions
 from .sim.robot import FR5Robot
@@ -196,10 +198,19 @@ class FR5Env(gym.Env):
         self._velocity_sample: Optional[Tuple[Sequence[float], float, List[float]]] = None
         self._workspace = (tuple(self.cfg.workspace.low), tuple(self.cfg.workspace.high))
         # randomisation.gripper_bridge_share: the gripper behind the bridge in this episode, or None.
-        self._bridge_model = (BridgedGripper(load_bridge_timing(), self.robot_spec.max_opening_width)
-                              if self.cfg.randomisation.enabled and self.cfg.randomisation.gripper_bridge_share > 0.0
-                              else None)
-        self._bridge: Optional[BridgedGripper] = None
+        self._bridge_model: Union[BridgedGripper, EmulatedGripperChain, None] = None
+        if self.cfg.randomisation.enabled and self.cfg.randomisation.gripper_bridge_share > 0.0:
+            max_width = self.robot_spec.max_opening_width
+            self._bridge_model = (EmulatedGripperChain.from_config(max_width)
+                                  if self.cfg.randomisation.gripper_bridge_emulation
+                                  else BridgedGripper(load_bridge_timing(), max_width))
+        self._bridge: Union[BridgedGripper, EmulatedGripperChain, None] = None
+        # randomisation.guard_share: the policy node's motion guard limits this episode's commands.
+        self._guard: Optional[MotionGuard] = None
+        self._guard_on = False
+        if self.cfg.randomisation.enabled and self.cfg.randomisation.guard_share > 0.0:
+            self._guard = MotionGuard(self.robot_spec, load_guard_settings(), self.robot_spec.home_joint_positions,
+                                      self.cfg.task(task).start_joint_noise, self.control_dt)
         # randomisation.target_share: the object seen through the camera's timing, or None.
         self._target: Optional[DelayedTarget] = None
         self._held = None  # hold_object's constraint (the camera's calibration), or None
@@ -255,6 +266,8 @@ class FR5Env(gym.Env):
         # where that is the newest /joint_states message, however old). Both lists hold finite
         # floats (the observation refuses anything else), so the shaper's checks are not repeated.
         targets = self.shaper.targets_from_floats(applied, self._observed_joint_positions)
+        if self._guard_on:  # the ramp-in from the episode's start and the joint-limit margin, as deployed
+            targets = self._guard.limit(targets, self._observed_joint_positions, self._steps * self.control_dt).tolist()
         width = sent_width if applied is values else self.shaper.gripper_width(applied)
         if self._bridge is not None:
             width = self._bridge.command(width, self._steps * self.control_dt)
@@ -655,3 +668,9 @@ class FR5Env(gym.Env):
         if on and rnd.gripper_latency_steps is not None:  # drawn only when set: configurations without it keep their episodes
             lo, hi = rnd.gripper_latency_steps
             self._gripper_latency_steps = int(rng.integers(lo, hi + 1))
+        # The policy node's motion guard, in plain episodes too (it runs on every chain): drawn
+        # only when asked for, so that other configurations keep their episodes.
+        self._guard_on = False
+        if self._guard is not None and rng.uniform() < rnd.guard_share:
+            self._guard_on = True
+            self._guard.restart()

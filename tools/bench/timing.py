@@ -55,10 +55,9 @@ Target (issue #27): >= 90 % reach behind the FAIRINO profile.
 import argparse
 import json
 import sys
-import xmlrpc.client
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
@@ -67,14 +66,14 @@ from benchlib import AT_LEAST, REPO, RESULTS_DIR, relative_path, update_summary,
 from fr5_rl.config import load_robot_spec, load_yaml, package_root, typed, whole_multiple
 from fr5_rl.deploy.deployment import Command, DeploymentStep, StepInputs
 from fr5_rl.deploy.joint_state import JointStateReader, Reading, velocities_from_positions
-from fr5_rl.deploy.motion_guard import MotionGuardSettings
+from fr5_rl.motion_guard import MotionGuardSettings
 from fr5_rl.deploy.policy import load_policy
-from fr5_rl.drivers.fr5_xmlrpc import Call, ControllerRefused, error_code_of
 from fr5_rl.drivers.gripper_bridge import GripperBridge, GripperBridgeParams, GripperReading
 from fr5_rl.env_config import load_env_config
 from fr5_rl.envs import FR5Env
 from fr5_rl.observation import DelayedTarget
 from fr5_rl.sim.controller_emulator import ControllerEmulator, ControllerEmulatorSettings
+from fr5_rl.sim.gripper_chain import InProcessController
 from fr5_rl.sim.servo import ServoCycle
 from fr5_rl.training.evaluation import wilson_interval
 from fr5_rl.training.success_map import write_success_map
@@ -131,23 +130,6 @@ class BenchClock:
 
     def __call__(self) -> float:
         return self.now
-
-
-class InProcessController:
-    """The bridge's controller client, answered by the emulator in-process (same replies as XML-RPC)."""
-
-    def __init__(self, emulator: ControllerEmulator) -> None:
-        self.emulator = emulator
-
-    def call(self, call: Call) -> Tuple[Any, ...]:
-        try:
-            reply = self.emulator.serve_call(call.method, call.args)
-        except xmlrpc.client.Fault as fault:
-            raise ControllerRefused(f"{call} raised XML-RPC fault {fault.faultCode}: {fault.faultString}") from None
-        code, values = error_code_of(reply)
-        if code != 0:
-            raise ControllerRefused(f"{call} returned error code {code}", code)
-        return values
 
 
 class ChainEmulation:

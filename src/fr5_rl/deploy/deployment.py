@@ -20,7 +20,7 @@ import numpy as np
 
 from ..config import RobotSpec
 from ..env_config import EnvConfig
-from .motion_guard import MotionGuard, MotionGuardSettings, StartPhase
+from ..motion_guard import MotionGuard, MotionGuardSettings, StartPhase
 from ..control import JointCommandShaper
 from ..kinematics import ForwardKinematics
 from ..observation import ActionHistory, ObservationBuilder, ObservationInputs
@@ -231,7 +231,7 @@ class DeploymentStep:
     :param future_stamp_tolerance: a target stamped more than this (s) ahead of ``stamp_now``
         comes from a clock that cannot be trusted: hold.
     :param guard: the real arm's start move, ramp-in and joint-limit margin
-        (:class:`~fr5_rl.deploy.motion_guard.MotionGuard`); None: none (as in training).
+        (:class:`~fr5_rl.motion_guard.MotionGuard`); None: none (as in training).
     """
 
     def __init__(self, policy: Policy, robot: RobotSpec, env_cfg: EnvConfig, joint_state_timeout: float,

@@ -38,7 +38,7 @@ import numpy as np
 from ..config import ConfigError, load_robot_spec, load_yaml, typed
 from .calibration_motion import CalibrationMove, calibration_poses
 from ..deploy.joint_state import JointStateReader
-from ..deploy.motion_guard import MotionGuardSettings
+from ..motion_guard import MotionGuardSettings
 from ..env_config import load_env_config
 from ..perception.camera_model import Intrinsics
 from ..perception.hand_eye import (CalibrationRefused, CalibrationSettings, HandEyeResult, calibrated_transforms_yaml,

@@ -7,7 +7,7 @@ and in the camera's view, and tilt the tcp no more than ``max_tilt``: no inverse
 needed and every pose is reachable by construction.
 
 The moves (:class:`CalibrationMove`) are the policy node's own slow start move
-(:meth:`~fr5_rl.deploy.motion_guard.MotionGuard.start_move`: slowest-joint synchronised, at most
+(:meth:`~fr5_rl.motion_guard.MotionGuard.start_move`: slowest-joint synchronised, at most
 0.3 rad/s, hands over at rest), with its joint-limit margin (:meth:`MotionGuard.limit`), and
 every command passes the deployment's :class:`~fr5_rl.deploy.deployment.SafetyGate` (limits,
 per-period velocity, the safety zone) before it may be sent.
@@ -26,7 +26,7 @@ from ..kinematics import ForwardKinematics
 from ..perception.camera_model import Intrinsics
 from ..perception.hand_eye import CalibrationSettings
 from ..deploy.deployment import SafetyGate, SafetyZone
-from ..deploy.motion_guard import MotionGuard, MotionGuardSettings
+from ..motion_guard import MotionGuard, MotionGuardSettings
 
 
 def calibration_poses(settings: CalibrationSettings, robot: RobotSpec, env_cfg: EnvConfig,

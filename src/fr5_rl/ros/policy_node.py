@@ -45,7 +45,7 @@ from ..env_config import load_env_config
 from ..deploy.bundle import ModelFilesError
 from ..deploy.deployment import Command, DeploymentStep, Hold, HoldReason, StepInputs
 from ..deploy.joint_state import JointStateReader, Reading, velocities_from_positions
-from ..deploy.motion_guard import MotionGuardSettings, StartPhase
+from ..motion_guard import MotionGuardSettings, StartPhase
 from ..deploy.policy import load_policy
 from .params import exit_if_help_asked, node_parameters
 

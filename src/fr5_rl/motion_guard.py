@@ -1,10 +1,12 @@
-"""What a real arm needs around the policy and training never had: a slow move into the training
-start distribution before the policy takes over, a velocity limit that ramps in after every
-pause, and a margin from the joint limits.
+"""What a real arm needs around the policy: a slow move into the training start distribution
+before the policy takes over, a velocity limit that ramps in after every pause, and a margin from
+the joint limits.
 
 :class:`MotionGuard` is pure logic on joint positions (rad), driven once a control period by
 :class:`~fr5_rl.deploy.deployment.DeploymentStep`; its settings are the ``guard`` section of
-``config/policy_node.yaml``.
+``config/policy_node.yaml``. It sits with the action shaping (the shared layer), not in
+``deploy``: the environment runs the same ramp and margin where ``randomisation.guard_share``
+asks for them, so that a policy can train on what the node does to its first commands.
 """
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..config import ConfigError, RobotSpec, check_positive
+from .config import ConfigError, RobotSpec, check_positive, load_yaml, typed
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,11 @@ class MotionGuardSettings:
             raise ConfigError(f"{source}: 'guard.joint_limit_margin' must be >= 0 rad and "
                               f"'guard.glitch_speed_factor' above 1, got {self.joint_limit_margin}, "
                               f"{self.glitch_speed_factor}")
+
+
+def load_guard_settings(config_name: str = "policy_node") -> MotionGuardSettings:
+    """The policy node's guard (``guard`` of config/<config_name>.yaml), as it runs on every chain."""
+    return typed(MotionGuardSettings, load_yaml(config_name)["guard"], f"config/{config_name}.yaml", "guard")
 
 
 class StartPhase(enum.Enum):
