@@ -25,10 +25,10 @@ from .config import load_robot_spec
 from .env_config import EnvConfig, load_env_config
 from .control import ACTION_SIZE, JointCommandShaper, finite_values
 from .gripper import BridgedGripper, load_bridge_timing
-from .sim.gripper_chain import EmulatedGripperChain
-from .motion_guard import MotionGuard, load_guard_settings
 from .kinematics import ForwardKinematics
+from .motion_guard import MotionGuard, load_guard_settings
 from .observation import ActionHistory, DelayedTarget, ObservationBuilder, velocity_from_positions
+from .sim.gripper_chain import EmulatedGripperChain
 from .sim.robot import FR5Robot
 from .sim.servo import FirstOrderResponse
 from .sim.world import PyBulletWorld
