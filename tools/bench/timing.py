@@ -73,7 +73,7 @@ from fr5_rl.env_config import load_env_config
 from fr5_rl.envs import FR5Env
 from fr5_rl.observation import DelayedTarget
 from fr5_rl.sim.controller_emulator import ControllerEmulator, ControllerEmulatorSettings
-from fr5_rl.sim.gripper_chain import InProcessController
+from fr5_rl.sim.gripper_chain import ChainClock, InProcessController
 from fr5_rl.sim.servo import ServoCycle
 from fr5_rl.training.evaluation import wilson_interval
 from fr5_rl.training.success_map import write_success_map
@@ -122,16 +122,6 @@ class Chain:
                    publish_velocities=velocity_source == "driver", target=args.target)
 
 
-class BenchClock:
-    """The bench's time (s): the bridge, the emulator and the readings share it."""
-
-    def __init__(self) -> None:
-        self.now = 0.0
-
-    def __call__(self) -> float:
-        return self.now
-
-
 class ChainEmulation:
     """The simulator, the drivers and the policy node of one chain, on one clock."""
 
@@ -159,7 +149,7 @@ class ChainEmulation:
                                        velocities_from_positions=estimate,
                                        max_joint_speeds=self.robot.velocity_limits * guard.glitch_speed_factor,
                                        estimate_interval=0.9 * env.control_dt)  # as policy_node
-        self.clock = BenchClock()
+        self.clock = ChainClock()
         self.fault: Optional[str] = None
         self.emulator: Optional[ControllerEmulator] = None
         self.bridge: Optional[GripperBridge] = None
