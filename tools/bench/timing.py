@@ -66,7 +66,7 @@ from benchlib import AT_LEAST, REPO, RESULTS_DIR, relative_path, update_summary,
 from fr5_rl.config import load_robot_spec, load_yaml, package_root, typed, whole_multiple
 from fr5_rl.deploy.deployment import Command, DeploymentStep, StepInputs
 from fr5_rl.deploy.joint_state import JointStateReader, Reading, velocities_from_positions
-from fr5_rl.motion_guard import MotionGuardSettings
+from fr5_rl.motion_guard import MotionGuardSettings, load_guard_settings
 from fr5_rl.deploy.policy import load_policy
 from fr5_rl.drivers.gripper_bridge import GripperBridge, GripperBridgeParams, GripperReading
 from fr5_rl.env_config import load_env_config
@@ -141,8 +141,7 @@ class ChainEmulation:
         # Measured compute latencies (s) to draw each period's from, instead of the fixed one.
         self.compute_samples = None if compute_samples_s is None else np.asarray(compute_samples_s, dtype=float)
         self.pause_steps = int(round(float(params["pause_between_episodes"]) / self.physics_dt))
-        node = load_yaml(package_root() / "config" / "policy_node.yaml")
-        guard = typed(MotionGuardSettings, node["guard"], "config/policy_node.yaml guard")
+        guard = load_guard_settings()
         estimate = velocities_from_positions("positions" if chain.velocity_source == "positions" else "driver",
                                              trained_velocity_source)
         self.reader = JointStateReader(self.robot.joint_names, self.robot.finger_joint_names,

@@ -35,10 +35,10 @@ from typing import Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..config import ConfigError, load_robot_spec, load_yaml, typed
+from ..config import ConfigError, load_robot_spec
 from .calibration_motion import CalibrationMove, calibration_poses
 from ..deploy.joint_state import JointStateReader
-from ..motion_guard import MotionGuardSettings
+from ..motion_guard import load_guard_settings
 from ..env_config import load_env_config
 from ..perception.camera_model import Intrinsics
 from ..perception.hand_eye import (CalibrationRefused, CalibrationSettings, HandEyeResult, calibrated_transforms_yaml,
@@ -345,7 +345,7 @@ def observations_live(calibration: Calibration, count: int, joint_states_topic: 
     s = calibration.settings
     session = LiveSession(calibration, joint_states_topic, command_topic)
     robot, env_cfg = calibration.robot, load_env_config()
-    guard = typed(MotionGuardSettings, load_yaml("policy_node")["guard"], "config/policy_node.yaml", "guard")
+    guard = load_guard_settings()
     deadline = time.monotonic() + 30.0
     while session.state()[0] is None or not session.frames:
         if time.monotonic() > deadline or rospy.is_shutdown():
