@@ -50,6 +50,9 @@ Before the simulator node took gripper commands up at their arrival, it put thre
 about 95 % on seeds 1020000+ where ROS gave them 70-95 %. Since, on the same 60 seeds it was
 within 2 episodes of ROS for chains 5 and 10 and 6 above it for chain 6 (docs/experiments.md,
 "The simulator closed the fingers early"). Iterate on it, and judge the camera chain through ROS.
+Behind the FAIRINO driver alone it ranked chains 5, 10 and 11 as ROS did, but gave chain 14 39/40
+where ROS gave 33-38/40 on the same seeds (docs/experiments.md, "Chain 14"): confirm a model on
+ROS before trusting its figure here.
 Target (issue #27): >= 90 % reach behind the FAIRINO profile.
 """
 import argparse
