@@ -7,6 +7,7 @@ import shutil
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -162,6 +163,24 @@ def free_port() -> int:
         return sock.getsockname()[1]
 
 
+def wait_for_master(uri: str, core: subprocess.Popen, timeout: float = 60.0) -> None:
+    """Block until the ROS master at ``uri`` answers as a master. A node started before that
+    may reach roscore's start-up half-done (CI once saw 'method "setParam" is not supported')."""
+    import xmlrpc.client
+
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            code, _, _ = xmlrpc.client.ServerProxy(uri).getPid("/test_model_files")
+            if code == 1:
+                return
+        except (OSError, xmlrpc.client.Fault, xmlrpc.client.ProtocolError):
+            pass
+        assert core.poll() is None, f"roscore at {uri} exited with {core.returncode}"
+        assert time.monotonic() < deadline, f"no ROS master answered at {uri} within {timeout:g} s"
+        time.sleep(0.2)
+
+
 @pytest.mark.slow  # starts a roscore and the node
 def test_policy_node_logs_fatal_and_exits_nonzero(tmp_path):
     """A real roscore; the node is started as a user would, on a damaged model."""
@@ -171,6 +190,7 @@ def test_policy_node_logs_fatal_and_exits_nonzero(tmp_path):
     port = env["ROS_MASTER_URI"].rsplit(":", 1)[1]
     core = subprocess.Popen(["roscore", "-p", port], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
+        wait_for_master(env["ROS_MASTER_URI"], core)
         result = subprocess.run(["rosrun", "fr5_rl", "policy_node.py", f"_model_dir:={model}", "_backend:=torch"],
                                 env=env, capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
     finally:
