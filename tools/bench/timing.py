@@ -56,6 +56,7 @@ ROS before trusting its figure here.
 Target (issue #27): >= 90 % reach behind the FAIRINO profile.
 """
 import argparse
+import dataclasses
 import json
 import sys
 from dataclasses import dataclass
@@ -69,7 +70,7 @@ from benchlib import AT_LEAST, REPO, RESULTS_DIR, relative_path, update_summary,
 from fr5_rl.config import load_robot_spec, load_yaml, package_root, typed, whole_multiple
 from fr5_rl.deploy.deployment import Command, DeploymentStep, StepInputs
 from fr5_rl.deploy.joint_state import JointStateReader, Reading, velocities_from_positions
-from fr5_rl.motion_guard import MotionGuardSettings, load_guard_settings
+from fr5_rl.motion_guard import load_guard_settings
 from fr5_rl.deploy.policy import load_policy
 from fr5_rl.drivers.gripper_bridge import GripperBridge, GripperBridgeParams, GripperReading
 from fr5_rl.env_config import load_env_config
@@ -339,7 +340,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     env = FR5Env(task, config={task: {"simulation": {"physics_dt": float(params["physics_dt"]),
                                                      "solver_iterations": int(params["solver_iterations"])}}})
     node_cfg = load_yaml(package_root() / "config" / "policy_node.yaml")
-    guard = typed(MotionGuardSettings, {**node_cfg["guard"], "go_to_start": True}, "config/policy_node.yaml guard")
+    guard = dataclasses.replace(load_guard_settings(), go_to_start=True)  # the bench makes the start moves itself
     trained = load_env_config(policy.meta.get("env_overrides", {}))
     step = DeploymentStep(policy, robot, trained,
                           float(node_cfg["joint_state_timeout"]), float(node_cfg["target_timeout"]),
