@@ -20,7 +20,8 @@ from fr5_rl.env_config import load_env_config  # noqa: E402
 from fr5_rl.envs import FR5Env  # noqa: E402
 
 
-def emulation(profile: str, hidden_radius: float = timing.CAMERA_HIDDEN_RADIUS_M, **overrides):
+def emulation(profile: str, hidden_radius: float = timing.CAMERA_HIDDEN_RADIUS_M, state_jitter_s: float = 0.0,
+              fresh_state_wait_s: float = 0.0, **overrides):
     params = timing.simulator_profile(profile)
     args = argparse.Namespace(**{"finger_source": None, "velocity_source": None, "episode_start": None,
                                  "target": "simulator", **overrides})
@@ -34,7 +35,8 @@ def emulation(profile: str, hidden_radius: float = timing.CAMERA_HIDDEN_RADIUS_M
     step = DeploymentStep(policy, load_robot_spec(), trained, float(node["joint_state_timeout"]),
                           float(node["target_timeout"]), guard=guard if chain.episode_start == "go_to_start" else None)
     return timing.ChainEmulation(env, step, chain, params, 0.002, np.random.default_rng(0),
-                                 trained.observation.joint_velocity_source, hidden_radius), env
+                                 trained.observation.joint_velocity_source, hidden_radius,
+                                 state_jitter_s=state_jitter_s, fresh_state_wait_s=fresh_state_wait_s), env
 
 
 def test_the_fairino_profile_is_the_rehearsals_chain():
@@ -119,3 +121,21 @@ def test_compute_latencies_drawn_from_a_measured_record_set_when_each_command_ac
         assert drawn == {0, round(0.012 / run.physics_dt), round(0.04 / run.physics_dt)}
     finally:
         env.close()
+
+
+def test_late_joint_states_repeat_in_some_periods_unless_the_node_waits_for_a_new_one():
+    """Delivery jitter beside a timer at the driver's own rate hands some periods the state the
+    period before used; the node's wait for a new state (policy_node ~fresh_state_wait) ends that."""
+    repeated = {}
+    for wait_s in (0.0, 0.015):
+        # Up to 20 ms late: every phase of the timer against the states meets it.
+        run, env = emulation("fairino", state_jitter_s=0.02, fresh_state_wait_s=wait_s)
+        try:
+            for seed in range(940_000, 940_004):
+                run.run_episode(seed)
+            assert run.periods > 100
+            repeated[wait_s] = run.repeated_states / run.periods
+        finally:
+            env.close()
+    assert repeated[0.0] > 0.1
+    assert repeated[0.015] < 0.1 * repeated[0.0]

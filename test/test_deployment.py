@@ -495,3 +495,32 @@ def test_estimates_from_a_fast_driver_span_a_control_period():
     slow.update(names, [0.01] * 6, [], 1.02, 1.02)
     slow.update(names, [0.03] * 6, [], 1.04, 1.04)
     assert slow.reading().value.velocities == pytest.approx([1.0] * 6)
+
+
+def _arm_reading(reader: JointStateReader, positions, stamp: float, received: float):
+    reader.update(ARM, positions, [], stamp, received)
+    return reader.reading()
+
+
+def test_a_period_waits_only_for_a_state_no_period_used():
+    from fr5_rl.deploy.joint_state import FreshStateWait
+    reader = JointStateReader(ROBOT.joint_names, ROBOT.finger_joint_names)
+    fresh = FreshStateWait(0.015)
+    assert fresh.is_new(None)  # nothing yet: the step holds at once, there is nothing to wait for
+    first = _arm_reading(reader, [0.0] * 6, stamp=1.00, received=10.00)
+    assert fresh.is_new(first)
+    fresh.used(first)
+    assert not fresh.is_new(reader.reading())  # the same message again: wait
+    # A finger update does not make the arm's state new.
+    reader.update(list(ROBOT.finger_joint_names), [0.02, 0.02], [], 1.01, 10.01)
+    assert not fresh.is_new(reader.reading())
+    second = _arm_reading(reader, [0.01] * 6, stamp=1.02, received=10.02)
+    assert fresh.is_new(second)
+    fresh.used(second)
+    # An unusable state is never waited on: the period holds on it.
+    reader.update(ARM[:1], [float("nan")], [], 1.04, 10.04)
+    assert fresh.is_new(reader.reading())
+    with pytest.raises(ValueError, match=">= 0"):
+        FreshStateWait(-0.001)
+    with pytest.raises(ValueError, match=">= 0"):
+        FreshStateWait(float("nan"))

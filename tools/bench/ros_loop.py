@@ -4,7 +4,8 @@
 
 Starts ``sim_policy.launch`` headless on its own ROS master, records the policy node's
 per-cycle timing (``/fr5_policy/timing``: loop period, inference, compute latency from reading
-the inputs to publishing, age of the joint state used), and compares the closed-loop success
+the inputs to publishing, age of the joint state used, the wait for a new one, repeated states),
+and compares the closed-loop success
 rate through ROS with the gym evaluation of the same model on the same placements (seeds).
 Writes bench/results/ros_loop_<task>.json and updates that bench's entries in
 bench/results/summary.json. Targets: latency p99 <= 3 ms, period jitter p99 <= 2 ms, parity
@@ -81,7 +82,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     rospy.signal_shutdown("done")
     for process in busy:
         process.kill()
-    timing = np.array(samples[5:]) if len(samples) > 5 else np.zeros((0, 4))  # skip start-up cycles
+    timing = np.array(samples[5:]) if len(samples) > 5 else np.zeros((0, 6))  # skip start-up cycles
     control_dt = float(meta.get("control_dt", 0.02))
 
     from fr5_rl.deploy.policy import load_policy
@@ -106,12 +107,15 @@ def main(argv: Optional[List[str]] = None) -> int:
         "inference": timing_ms(timing[:, 1]),
         "compute_latency": timing_ms(timing[:, 2]),
         "joint_state_age_at_command": timing_ms(timing[:, 3]),
+        "new_state_wait": timing_ms(timing[:, 4]),
+        "repeated_joint_state_share": round(float(timing[:, 5].mean()), 4) if len(timing) else None,
         "targets": dict(TARGETS),
     }
     verdicts = ros_verdicts(result)
     if len(timing):
         print(f"policy node ({args.backend}), {len(timing)} cycles:")
-        for key in ("loop_period", "period_jitter", "inference", "compute_latency", "joint_state_age_at_command"):
+        for key in ("loop_period", "period_jitter", "inference", "compute_latency", "joint_state_age_at_command",
+                    "new_state_wait"):
             print(f"  {key:28s} p50 {result[key]['p50_ms']:.3f} ms  p99 {result[key]['p99_ms']:.3f} ms")
     print(f"closed loop through ROS: {successes}/{episodes}; gym on the same seeds: {gym_rate:.0%}; "
           f"gap {result['parity_gap_points']} points")

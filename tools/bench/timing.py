@@ -69,7 +69,7 @@ from benchlib import AT_LEAST, REPO, RESULTS_DIR, relative_path, update_summary,
 
 from fr5_rl.config import load_robot_spec, load_yaml, package_root, typed, whole_multiple
 from fr5_rl.deploy.deployment import Command, DeploymentStep, StepInputs
-from fr5_rl.deploy.joint_state import JointStateReader, Reading, velocities_from_positions
+from fr5_rl.deploy.joint_state import FreshStateWait, JointStateReader, Reading, velocities_from_positions
 from fr5_rl.motion_guard import load_guard_settings
 from fr5_rl.deploy.policy import load_policy
 from fr5_rl.drivers.gripper_bridge import GripperBridge, GripperBridgeParams, GripperReading
@@ -132,7 +132,8 @@ class ChainEmulation:
     def __init__(self, env: FR5Env, step: DeploymentStep, chain: Chain, params: Dict[str, Any],
                  compute_s: float, rng: np.random.Generator, trained_velocity_source: str,
                  hidden_radius: float = CAMERA_HIDDEN_RADIUS_M,
-                 compute_samples_s: Optional[Sequence[float]] = None) -> None:
+                 compute_samples_s: Optional[Sequence[float]] = None,
+                 state_jitter_s: float = 0.0, fresh_state_wait_s: float = 0.0) -> None:
         self.env, self.step, self.chain, self.rng = env, step, chain, rng
         self.robot = env.robot_spec
         self.physics_dt = float(params["physics_dt"])
@@ -145,6 +146,13 @@ class ChainEmulation:
         # Measured compute latencies (s) to draw each period's from, instead of the fixed one.
         self.compute_samples = None if compute_samples_s is None else np.asarray(compute_samples_s, dtype=float)
         self.pause_steps = int(round(float(params["pause_between_episodes"]) / self.physics_dt))
+        # Each joint state reaches the node up to this much after it was sampled (a late simulator
+        # loop, the transport): near the timer's ticks, some periods then find no new state.
+        self.state_jitter_s = state_jitter_s
+        self.fresh_state = FreshStateWait(fresh_state_wait_s)  # as policy_node: wait for a new state
+        self.wait_steps = int(fresh_state_wait_s / self.physics_dt + 1e-9)
+        self.in_flight: List[tuple] = []  # (physics step it reaches the node, names, positions, velocities, stamp)
+        self.repeated_states = self.periods = 0
         guard = load_guard_settings()
         estimate = velocities_from_positions("positions" if chain.velocity_source == "positions" else "driver",
                                              trained_velocity_source)
@@ -194,12 +202,24 @@ class ChainEmulation:
             if self.bridge.poll() is None:
                 return
 
-    def _publish_joint_states(self) -> None:
+    def _publish_joint_states(self, k: int) -> None:
+        """Sample the driver's joint state at physics step ``k``; it reaches the node at once, or
+        a drawn delivery delay later (``state_jitter_s``)."""
         states = self.env.joint_states()
         arm = len(self.robot.joint_names)
         count = len(states.names) if self.chain.finger_source == "driver" else arm
         velocities = states.velocities[:count] if self.chain.publish_velocities else [0.0] * count
-        self.reader.update(states.names[:count], states.positions[:count], velocities, self.clock.now, self.clock.now)
+        delay_steps = 0
+        if self.state_jitter_s > 0.0:
+            delay_steps = int(np.ceil(self.rng.uniform(0.0, self.state_jitter_s) / self.physics_dt - 1e-9))
+        self.in_flight.append((k + delay_steps, states.names[:count], states.positions[:count], velocities,
+                               self.clock.now))
+
+    def _deliver_joint_states(self, k: int) -> None:
+        """The states that reach the node by physics step ``k``, oldest first."""
+        while self.in_flight and self.in_flight[0][0] <= k:
+            _, names, positions, velocities, stamp = self.in_flight.pop(0)
+            self.reader.update(names, positions, velocities, stamp, self.clock.now)
 
     def _follow_controller(self) -> float:
         """sim_node._follow_controller: the fingers take the emulated controller's width."""
@@ -218,6 +238,7 @@ class ChainEmulation:
         else:
             _, info = env.reset(seed=seed)
         object_start = info["object_start"]
+        self._deliver_joint_states(sys.maxsize)  # the pause between episodes outlasts any delivery delay
         self.servo.reset(env.joint_positions())
         step.start_episode()
         self.reader.restart_estimates()  # policy_node.on_reset
@@ -232,18 +253,27 @@ class ChainEmulation:
         pending: List[tuple] = []  # (physics step it arrives at, arm targets, gripper width, from the policy)
         first_command_step: Optional[int] = None
         start_move_s = 0.0
+        waiting_until: Optional[int] = None  # a period waiting for a new state, until this step at most
         k = 0
         while True:
             self.clock.now += self.physics_dt
             if (k + publish_phase) % self.per_publish == 0:
-                self._publish_joint_states()
+                self._publish_joint_states(k)
+            self._deliver_joint_states(k)
             if self.bridge is not None:
                 self._poll_bridge()
                 gripper_width = self._follow_controller()
             if (k + policy_phase) % self.per_period == 0:
+                waiting_until = k + self.wait_steps
+            reading = self.reader.reading() if waiting_until is not None else None
+            if waiting_until is not None and (self.fresh_state.is_new(reading) or k >= waiting_until):
+                waiting_until = None
+                self.periods += 1
+                self.repeated_states += not self.fresh_state.is_new(reading)
+                self.fresh_state.used(reading)
                 now = self.clock.now
                 target = self._target(camera, now - episode_start_s)
-                result = step(StepInputs(now, self.reader.reading(), target, now, self.fault))
+                result = step(StepInputs(now, reading, target, now, self.fault))
                 if isinstance(result, Command):
                     pending.append((k + self._compute_steps(), result.arm_positions, result.gripper_width,
                                     result.target_in_base is not None))
@@ -325,6 +355,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         help="draw each period's compute latency from a JSON file with 'compute_latency_s': [s, ...] "
                              "(the policy node's ~timing, e.g. docs/bench/timing_chain/"
                              "compute_latency_whole_rehearsal_2026-11-26.json) instead of --compute-ms")
+    parser.add_argument("--state-jitter-ms", type=float, default=0.0,
+                        help="each joint state reaches the node U(0, this) ms after it was sampled (a late "
+                             "simulator loop, the transport; default 0: at once)")
+    parser.add_argument("--fresh-state-wait-ms", type=float, default=None,
+                        help="the node's ~fresh_state_wait in ms (default config/policy_node.yaml's): how long a "
+                             "period waits for a joint state no period used; 0: never")
     parser.add_argument("--results", type=Path, default=RESULTS_DIR)
     parser.add_argument("--name", default=None, help="result file stem (default timing_<task>_<profile>)")
     parser.add_argument("--map", type=Path, default=None,
@@ -347,12 +383,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                           target_workspace_margin=float(node_cfg["target_workspace_margin"]),
                           future_stamp_tolerance=float(node_cfg["future_stamp_tolerance"]),
                           guard=guard if chain.episode_start == "go_to_start" else None)
+    fresh_state_wait_s = (float(node_cfg["fresh_state_wait"]) if args.fresh_state_wait_ms is None
+                          else args.fresh_state_wait_ms / 1000.0)
     compute_samples = None
     if args.compute_from is not None:
         compute_samples = json.loads(args.compute_from.read_text())["compute_latency_s"]
     emulation = ChainEmulation(env, step, chain, params, args.compute_ms / 1000.0, np.random.default_rng(args.seed),
                                 trained.observation.joint_velocity_source, args.hidden_radius,
-                                compute_samples)
+                                compute_samples, args.state_jitter_ms / 1000.0, fresh_state_wait_s)
     records = [emulation.run_episode(args.seed + index) for index in range(args.episodes)]
     env.close()
     successes = sum(record["success"] for record in records)
@@ -363,7 +401,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     rate = successes / len(records)
     low, high = wilson_interval(successes, len(records))
     print(f"{relative_path(model_dir)} behind the {args.profile} profile ({chain}): {successes}/{len(records)} "
-          f"({100 * rate:.1f} %, 95 % CI {100 * low:.1f}-{100 * high:.1f} %), failures {failures}")
+          f"({100 * rate:.1f} %, 95 % CI {100 * low:.1f}-{100 * high:.1f} %), failures {failures}; "
+          f"{emulation.repeated_states} of {emulation.periods} periods acted on a state a period before used")
     verdicts = {"success_rate": verdict(rate, TARGET_SUCCESS, AT_LEAST)}
     name = args.name or f"timing_{task}_{args.profile}"
     out = args.results / f"{name}.json"
@@ -371,7 +410,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                        "chain": chain.__dict__,
                        "compute_ms": None if compute_samples is not None else args.compute_ms,
                        "compute_from": None if args.compute_from is None else relative_path(args.compute_from),
-                       "hidden_radius_m": args.hidden_radius if chain.target == "camera" else None, "episodes": len(records),
+                       "hidden_radius_m": args.hidden_radius if chain.target == "camera" else None,
+                       "state_jitter_ms": args.state_jitter_ms, "fresh_state_wait_ms": 1000.0 * fresh_state_wait_s,
+                       "periods": emulation.periods, "repeated_states": emulation.repeated_states,
+                       "episodes": len(records),
                        "seed": args.seed, "successes": successes, "success_rate": rate, "success_ci95": [low, high],
                        "failures": failures, "records": records}, verdicts)
     update_summary(args.results, name, out)

@@ -185,7 +185,7 @@ def closed_loop(model: str, task: str, episodes: int, seed: int, port: int, prof
             policy_holds[reason] = policy_holds.get(reason, 0) + 1
 
     def on_policy_timing(message: Float64MultiArray) -> None:
-        period, _inference, _compute, state_age = message.data
+        period, _inference, _compute, state_age = message.data[:4]
         policy_periods.append(period)
         joint_state_ages.append(state_age)
 

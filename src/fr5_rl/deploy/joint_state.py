@@ -55,6 +55,43 @@ def velocities_from_positions(driver_source: str, trained_source: str) -> bool:
     return driver_source == "positions" or trained_source == "positions"
 
 
+class FreshStateWait:
+    """Which joint state the last control period acted on, so that the next acts on a newer one.
+
+    A driver that publishes at the control rate (the FAIRINO driver: 50 Hz) runs on its own
+    clock, not the node's timer. Where its states arrive close to the timer's ticks, delivery
+    jitter hands some periods the state the period before used: through ROS about one period in
+    ten. Such a period adds its increment to a position a whole period old, so the arm makes
+    less of each step than in training, and the repeats come and go with a phase drawn at each
+    start. A period that finds no new state waits for one, up to ``wait_s``; the node's periods
+    then follow the driver's states, however the two clocks lie.
+
+    :param wait_s: the longest a period waits for a new state (s); 0: never.
+    """
+
+    def __init__(self, wait_s: float) -> None:
+        if not wait_s >= 0.0:
+            raise ValueError(f"the wait for a new joint state must be >= 0 s, got {wait_s}")
+        self.wait_s = float(wait_s)
+        self._used: Optional[Tuple[float, float]] = None
+
+    @staticmethod
+    def _key(reading: Optional[Reading]) -> Optional[Tuple[float, float]]:
+        return None if reading is None or reading.value is None else (reading.received, reading.stamp)
+
+    def is_new(self, reading: Optional[Reading]) -> bool:
+        """Whether ``reading`` is a state no period acted on (an unusable one counts as new: the
+        period holds on it at once, it has nothing to wait for)."""
+        key = self._key(reading)
+        return key is None or key != self._used
+
+    def used(self, reading: Optional[Reading]) -> None:
+        """A period acted on ``reading``."""
+        key = self._key(reading)
+        if key is not None:
+            self._used = key
+
+
 class JointStateReader:
     """Merges joint-state messages *by name* into the newest :class:`ArmJointState`.
 

@@ -17,7 +17,10 @@ arm was homed. On simulated time (``/use_sim_time``, a lockstep simulator) each 
 waits, up to ``~sim_time_input_wait`` wall seconds, for the joint state and target stamped at the
 period's start, so the outcome does not depend on which topic arrived first. Per-cycle timing
 goes to ``~timing`` (Float64MultiArray: loop period, inference time, compute latency,
-joint-state age, all seconds) and a summary to ``/diagnostics`` at 1 Hz. Parameters: ``config/policy_node.yaml``.
+joint-state age, the wait for a new joint state, all seconds, and 1.0 where the period acted on
+a state an earlier period had used, else 0.0) and a summary to ``/diagnostics`` at 1 Hz. In real
+time a period waits, up to ``~fresh_state_wait``, for a joint state no period acted on
+(:class:`~fr5_rl.deploy.joint_state.FreshStateWait`). Parameters: ``config/policy_node.yaml``.
 """
 from __future__ import annotations
 
@@ -44,7 +47,7 @@ from ..config import ConfigError, check_positive, load_robot_spec, package_root
 from ..env_config import load_env_config
 from ..deploy.bundle import ModelFilesError
 from ..deploy.deployment import Command, DeploymentStep, Hold, HoldReason, StepInputs
-from ..deploy.joint_state import JointStateReader, Reading, velocities_from_positions
+from ..deploy.joint_state import FreshStateWait, JointStateReader, Reading, velocities_from_positions
 from ..motion_guard import MotionGuardSettings, StartPhase
 from ..deploy.policy import load_policy
 from .params import exit_if_help_asked, node_parameters
@@ -77,6 +80,7 @@ class PolicyNodeParams:
     dry_run_topic: str
     enabled: bool
     sim_time_input_wait: float
+    fresh_state_wait: float
     startup_grace: float
     start_move_timeout: float
     motion_guard: bool
@@ -90,6 +94,9 @@ class PolicyNodeParams:
             raise ConfigError(f"{source}: 'startup_grace' must be >= 0 s, got {self.startup_grace}")
         if self.sim_time_input_wait < 0:
             raise ConfigError(f"{source}: 'sim_time_input_wait' must be >= 0 s, got {self.sim_time_input_wait}")
+        if not 0.0 <= self.fresh_state_wait < 1.0 / self.rate:
+            raise ConfigError(f"{source}: 'fresh_state_wait' must be >= 0 s and shorter than a control period "
+                              f"({1.0 / self.rate:g} s), got {self.fresh_state_wait}")
         if self.backend not in ("torch", "onnx"):
             raise ConfigError(f"{source}: 'backend' must be torch or onnx, got {self.backend!r}")
         check_positive(source, rate=self.rate, joint_state_timeout=self.joint_state_timeout,
@@ -134,6 +141,8 @@ class PolicyNode:
         self.inputs_changed = threading.Condition()
         self.sim_time = bool(rospy.get_param("/use_sim_time", False))
         self.last_input_stamp = -1.0  # sim time: stamp of the joint state the last step used
+        # Real time: a period acts on a state no period before acted on (FreshStateWait's why).
+        self.fresh_state = FreshStateWait(0.0 if self.sim_time else params.fresh_state_wait)
 
         self.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
@@ -175,7 +184,7 @@ class PolicyNode:
         if self.reader.update(message.name, message.position, message.velocity, message.header.stamp.to_sec(),
                               time.monotonic()) is None:
             self.joint_state_stamp = message.header.stamp
-        if self.sim_time:
+        if self.sim_time or self.fresh_state.wait_s > 0.0:
             with self.inputs_changed:
                 self.inputs_changed.notify_all()
 
@@ -246,6 +255,22 @@ class PolicyNode:
                     return
                 self.inputs_changed.wait(left)
 
+    def wait_for_new_state(self) -> float:
+        """Real time: wait (bounded by ~fresh_state_wait) until a joint state arrives that no
+        period acted on yet.
+
+        :return: how long it waited (s).
+        """
+        start = time.monotonic()
+        deadline = start + self.fresh_state.wait_s
+        with self.inputs_changed:
+            while not self.fresh_state.is_new(self.reader.reading()) and not rospy.is_shutdown():
+                left = deadline - time.monotonic()
+                if left <= 0.0:
+                    break  # the driver is late: act on the state there is
+                self.inputs_changed.wait(left)
+        return time.monotonic() - start
+
     def target_in_base(self) -> Optional[Reading]:
         """The newest target transformed into the base frame, or the tf problem."""
         message, received = self.target, self.target_received
@@ -268,6 +293,7 @@ class PolicyNode:
         """One control period starting at ``period_start`` (ROS time): step, then publish."""
         if rospy.is_shutdown():
             return
+        waited = self.wait_for_new_state() if self.fresh_state.wait_s > 0.0 else 0.0
         start = time.perf_counter()
         period = start - self.last_tick if self.last_tick is not None else self.control_dt
         self.last_tick = start
@@ -275,6 +301,8 @@ class PolicyNode:
             self.wait_for_inputs_of(period_start)
         with self.inputs_changed:
             joint_state = self.reader.reading()
+            repeated = not self.fresh_state.is_new(joint_state)
+            self.fresh_state.used(joint_state)
             if self.sim_time and joint_state is not None:
                 # A period that waited until the next period's inputs came (its own were lost
                 # before the connections stood) already commanded that period: not twice.
@@ -295,7 +323,7 @@ class PolicyNode:
         self.publish(result)
         stamp = self.joint_state_stamp
         state_age = (rospy.Time.now() - stamp).to_sec() if stamp.to_sec() > 0 else float("nan")
-        timing = (period, result.inference_s, time.perf_counter() - start, state_age)
+        timing = (period, result.inference_s, time.perf_counter() - start, state_age, waited, float(repeated))
         self.timing.append(timing)
         self.timing_pub.publish(Float64MultiArray(data=list(timing)))
 
@@ -354,12 +382,15 @@ class PolicyNode:
             status.level, status.message = DiagnosticStatus.WARN, f"holding: {hold}"
         else:
             status.level, status.message = DiagnosticStatus.OK, "running"
-        samples = np.array(self.timing) if self.timing else np.zeros((0, 4))
-        for column, name in enumerate(("loop_period", "inference", "compute_latency", "joint_state_age")):
+        samples = np.array(self.timing) if self.timing else np.zeros((0, 6))
+        for column, name in enumerate(("loop_period", "inference", "compute_latency", "joint_state_age",
+                                       "new_state_wait")):
             if len(samples):
                 values = samples[:, column] * 1000.0
                 status.values.append(KeyValue(f"{name}_p50_ms", f"{np.nanpercentile(values, 50):.3f}"))
                 status.values.append(KeyValue(f"{name}_p99_ms", f"{np.nanpercentile(values, 99):.3f}"))
+        if len(samples):
+            status.values.append(KeyValue("repeated_joint_state_share", f"{samples[:, 5].mean():.3f}"))
         array = DiagnosticArray(status=[status])
         array.header.stamp = rospy.Time.now()
         self.diagnostics_pub.publish(array)
