@@ -4,6 +4,7 @@
                                  [--profile fairino|default] [--compute-ms 2]
                                  [--finger-source ...] [--velocity-source ...] [--episode-start ...]
                                  [--target simulator|camera] [--hidden-radius 0.15] [--compute-from FILE]
+                                 [--state-jitter-ms 0] [--fresh-state-wait-ms 15]
 
 A twenty-episode ROS run says little about a 90 % target: its confidence interval spans about
 70-97 %. This bench reproduces, physics step by physics step, what
@@ -23,7 +24,8 @@ the noise of a ROS run, so hundreds of episodes take a minute:
   positions behind a driver that sends none: ``joint_velocity_source: positions``, as
   real_policy.launch sets it), its ``DeploymentStep`` with the motion guard, at 50 Hz with a random
   phase against the joint states, each command acting ``--compute-ms`` after the period starts
-  (``ros_loop.py`` measures the node's compute: p50 0.5 ms quiet, 1.7 ms with a core busy);
+  (``ros_loop.py`` measures the node's compute: p50 0.5 ms quiet, 1.7 ms with a core busy), each
+  period waiting for a joint state no period used as the node does (``FreshStateWait``);
 - **target** (``--target camera``): the object's position as the camera and the detector deliver
   it, by the model the environments train with (``fr5_rl.observation.DelayedTarget``): frames at
   ``randomisation.target_rate_hz`` with a random phase, each reaching the node a latency drawn
@@ -50,9 +52,13 @@ Before the simulator node took gripper commands up at their arrival, it put thre
 about 95 % on seeds 1020000+ where ROS gave them 70-95 %. Since, on the same 60 seeds it was
 within 2 episodes of ROS for chains 5 and 10 and 6 above it for chain 6 (docs/experiments.md,
 "The simulator closed the fingers early"). Iterate on it, and judge the camera chain through ROS.
-Behind the FAIRINO driver alone it ranked chains 5, 10 and 11 as ROS did, but gave chain 14 39/40
-where ROS gave 33-38/40 on the same seeds (docs/experiments.md, "Chain 14"): confirm a model on
-ROS before trusting its figure here.
+Behind the FAIRINO driver alone it ranked chains 5, 10 and 11 as ROS did. It gave chain 14 39/40
+where ROS gave 33-38/40 on the same seeds: through ROS the node then acted, in some periods, on the
+joint state the period before had used, which the bench's fixed phases never produce. Since the
+node waits for a new state (``~fresh_state_wait``), ROS gives chain 14 40/40 and 39/40 there
+(docs/experiments.md, "A period on the state before"). ``--state-jitter-ms`` delivers each state
+up to that late at random, so that some periods find no new one; with ``--fresh-state-wait-ms 0``
+the bench shows what that costs a model without the wait.
 Target (issue #27): >= 90 % reach behind the FAIRINO profile.
 """
 import argparse
