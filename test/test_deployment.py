@@ -9,7 +9,8 @@ from fr5_rl.config import load_robot_spec
 from fr5_rl.env_config import load_env_config
 from fr5_rl.deploy.bundle import ModelFilesError
 from fr5_rl.deploy.deployment import Command, DeploymentStep, Hold, HoldReason, SafetyGate, StepInputs
-from fr5_rl.deploy.joint_state import ArmJointState, JointStateReader, Reading, velocities_from_positions
+from fr5_rl.deploy.joint_state import (ArmJointState, FreshStateWait, JointStateReader, Reading,
+                                        velocities_from_positions)
 from fr5_rl.deploy.policy import Policy
 
 ROBOT = load_robot_spec()
@@ -503,7 +504,6 @@ def _arm_reading(reader: JointStateReader, positions, stamp: float, received: fl
 
 
 def test_a_period_waits_only_for_a_state_no_period_used():
-    from fr5_rl.deploy.joint_state import FreshStateWait
     reader = JointStateReader(ROBOT.joint_names, ROBOT.finger_joint_names)
     fresh = FreshStateWait(0.015)
     assert fresh.is_new(None)  # nothing yet: the step holds at once, there is nothing to wait for

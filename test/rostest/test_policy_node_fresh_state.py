@@ -3,7 +3,7 @@
 
 This node plays a driver that publishes at the control rate on its own clock, as the FAIRINO
 driver does (50 Hz), and a camera. It first learns the phase of the node's timer from the
-commands (joint states at 200 Hz, where every tick finds a new one), then publishes one state
+commands (joint states at 100 Hz, where every tick finds a new one), then publishes one state
 per period timed to arrive 2.5 ms before one tick and 2.5 ms after the next, in turn: the
 worst a driver at the node's rate can do, and what delivery jitter does now and then when the two
 clocks lie close. A node that reads whatever state it has at its tick acts on the previous
