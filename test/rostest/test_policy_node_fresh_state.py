@@ -4,9 +4,10 @@
 This node plays a driver that publishes at the control rate on its own clock, as the FAIRINO
 driver does (50 Hz), and a camera. It first learns the phase of the node's timer from the
 commands (joint states at 100 Hz, where every tick finds a new one), then publishes one state
-per period timed to arrive 2.5 ms before one tick and 2.5 ms after the next, in turn: the
-worst a driver at the node's rate can do, and what delivery jitter does now and then when the two
-clocks lie close. A node that reads whatever state it has at its tick acts on the previous
+per period timed to arrive 6 ms before one tick and 6 ms after the next, in turn: what delivery
+jitter does now and then when the two clocks lie close. The 6 ms is the margin for the test's own
+error in finding the tick on a loaded machine: without the wait, every other period repeats as
+long as that error stays under 6 ms; with it, the late state still arrives inside the 15 ms wait. A node that reads whatever state it has at its tick acts on the previous
 period's state in every other period (and skips the next state); this one, waiting for a new
 state (``~fresh_state_wait``), in none, and still commands once per period.
 """
@@ -26,7 +27,7 @@ from fr5_rl.config import load_robot_spec
 from fr5_rl.transforms import load_static_transforms, transform_in
 
 PERIOD = 0.02  # s, the reach model's control period
-JITTER = 0.0025  # s before and after the ticks in turn
+JITTER = 0.006  # s before and after the ticks in turn
 
 
 class Driver:
@@ -74,16 +75,17 @@ class Driver:
         self.target_pub.publish(message)
 
 
-def timer_phase(arrivals):
+def timer_phase(arrivals, compute_s):
     """The node's tick (wall s modulo the period) from its commands' arrival times: a command
-    leaves about a millisecond after its tick and now and then arrives some ms later still, so
-    the densest 2 ms of the arrivals, less a millisecond, is the tick."""
+    leaves ``compute_s`` after its tick (the node's own ~timing says how long a period takes)
+    and now and then arrives some ms later still, so the densest 2 ms of the arrivals, less the
+    compute time and a little for the transport, is the tick."""
     offsets = arrivals % PERIOD
     candidates = np.arange(0.0, PERIOD, 0.00025)
     counts = [(((offsets - start) % PERIOD) < 0.002).sum() for start in candidates]
     start = candidates[int(np.argmax(counts))]
     in_window = offsets[((offsets - start) % PERIOD) < 0.002]
-    return (start + np.median((in_window - start) % PERIOD) - 0.001) % PERIOD
+    return (start + np.median((in_window - start) % PERIOD) - compute_s - 0.0003) % PERIOD
 
 
 def sleep_until(wall_time):
@@ -104,7 +106,8 @@ class TestFreshState(unittest.TestCase):
         self.assertGreaterEqual(len(driver.command_times), 150, "the policy node never commanded")
         with driver.lock:
             arrivals = np.array(driver.command_times[-100:])
-        phase = timer_phase(arrivals)
+            compute_s = float(np.median(np.array(driver.timing[-100:])[:, 2]))
+        phase = timer_phase(arrivals, compute_s)
 
         # 2. One state a period, arriving JITTER before one tick and JITTER after the next.
         with driver.lock:
