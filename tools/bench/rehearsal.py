@@ -9,7 +9,10 @@ Chains (``--chains``):
   through the bridge and the simulator's emulation of the controller's XML-RPC;
 - ``fairino_vision``: the same, the target through the simulated RealSense and the detector
   (the whole rehearsal);
-- ``vision``: the target through camera and detector on the default driver.
+- ``vision``: the target through camera and detector on the default driver;
+- ``fairino_vision_truth``: the whole rehearsal with the camera and the detector running, but the
+  policy on the simulator's true pose (``vision_target:=truth``): what the camera's target costs
+  apart from the machine time the camera takes.
 
 Prints and writes ``rehearsal.json``: per model and chain, K/N with its 95 % Wilson interval and
 the failure causes and the seeds.
@@ -49,6 +52,9 @@ def placed(records: List[Dict[str, Any]], task: str) -> List[Dict[str, Any]]:
 CHAINS = {
     "fairino": {"driver": "fairino"},
     "fairino_vision": {"driver": "fairino", "vision": True},
+    # The whole rehearsal's camera and detector, running, but the policy on the true pose: what
+    # the camera's target costs apart from the machine time it takes.
+    "fairino_vision_truth": {"driver": "fairino", "vision": True, "vision_target": "truth"},
     "vision": {"vision": True},
 }
 
