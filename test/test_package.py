@@ -53,6 +53,33 @@ def test_the_vision_launch_arguments_set_the_cameras_parameters():
     assert slower["width"] == 320 and slower["rate"] == 10.0 and isinstance(slower["rate"], float)
 
 
+@pytest.mark.parametrize("driver", ["default", "fairino"])
+def test_vision_target_truth_moves_the_detector_off_the_policys_target(driver):
+    """``vision_target:=truth``: the simulator publishes the true pose on the policy's target
+    topic and the detector publishes elsewhere, on either driver; the default leaves the detector
+    alone on it; anything else is refused."""
+    import roslaunch.config
+    import roslaunch.core
+    import roslaunch.xmlloader
+
+    def params(*args):
+        config = roslaunch.config.ROSLaunchConfig()
+        roslaunch.xmlloader.XmlLoader().load(str(ROOT / "launch" / "sim_policy.launch"), config, verbose=False,
+                                             argv=["sim_policy.launch", "vision:=true", "rviz:=false",
+                                                   f"driver:={driver}", *args])
+        return {key: param.value for key, param in config.params.items()}
+
+    detector = params()
+    policy_target = detector["/fr5_policy/target_topic"]
+    assert detector["/detector/target_topic"] == policy_target and detector["/fr5_sim/publish_target"] is False
+    truth = params("vision_target:=truth")
+    assert truth["/fr5_policy/target_topic"] == truth["/fr5_sim/target_topic"] == policy_target
+    assert truth["/fr5_sim/publish_target"] is True
+    assert truth["/detector/target_topic"] not in (policy_target, "")
+    with pytest.raises(roslaunch.core.RLException, match="vision_target_must_be_detector_or_truth"):
+        params("vision_target:=camera")
+
+
 def test_every_script_is_a_thin_installed_entry_point():
     cmake = (ROOT / "CMakeLists.txt").read_text()
     for script in sorted((ROOT / "scripts").glob("*.py")):

@@ -5,11 +5,12 @@ This node plays a driver that publishes at the control rate on its own clock, as
 driver does (50 Hz), and a camera. It first learns the phase of the node's timer from the
 commands (joint states at 100 Hz, where every tick finds a new one), then publishes one state
 per period timed to arrive 6 ms before one tick and 6 ms after the next, in turn: what delivery
-jitter does now and then when the two clocks lie close. The 6 ms is the margin for the test's own
-error in finding the tick on a loaded machine: without the wait, every other period repeats as
-long as that error stays under 6 ms; with it, the late state still arrives inside the 15 ms wait. A node that reads whatever state it has at its tick acts on the previous
-period's state in every other period (and skips the next state); this one, waiting for a new
-state (``~fresh_state_wait``), in none, and still commands once per period.
+jitter does now and then when the two clocks lie close. A node that reads whatever state it has
+at its tick acts on the previous period's state in every other period (and skips the next
+state); this one, waiting for a new state (``~fresh_state_wait``), in none, and still commands
+once per period. The 6 ms is the margin for the test's own error in finding the tick on a loaded
+machine: without the wait every other period repeats while that error stays under 6 ms; with
+it the late state still arrives inside the 15 ms wait.
 """
 import math
 import threading
@@ -104,6 +105,7 @@ class TestFreshState(unittest.TestCase):
             driver.publish_joints()
             time.sleep(0.01)
         self.assertGreaterEqual(len(driver.command_times), 150, "the policy node never commanded")
+        self.assertGreaterEqual(len(driver.timing), 20, "no ~timing from the policy node")
         with driver.lock:
             arrivals = np.array(driver.command_times[-100:])
             compute_s = float(np.median(np.array(driver.timing[-100:])[:, 2]))
