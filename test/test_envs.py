@@ -513,10 +513,40 @@ def test_bad_actions_raise(bad):
     {"simulation": {"physics_dt": 0.003}},
     {"action": {"smoothing_alpha": 0.0}},
     {"object": {"region_low": [-0.3, -0.3], "region_high": [-0.35, 0.3]}},
+    {"randomisation": {"placement_focus_share": 1.5}},
+    {"randomisation": {"placement_focus_low": [-0.6, -0.3], "placement_focus_high": [-0.7, 0.3]}},
+    {"randomisation": {"placement_focus_low": [-0.7], "placement_focus_high": [-0.6]}},
 ])
 def test_bad_config_raises_config_error(config):
     with pytest.raises(ConfigError):
         FR5Env(task="reach", config=config)
+
+
+def test_placement_focus_places_its_share_in_the_focus_region_and_nothing_else_when_off():
+    """randomisation.placement_focus_share: with share 1 every object lands in the focus strip
+    (placed in PyBullet, read back from it); at 0 each seed places its object exactly as with
+    the focus fields absent, so that evaluation seeds keep their placements."""
+    focus = {"placement_focus_low": [-0.7, -0.3], "placement_focus_high": [-0.6, 0.3]}
+    seeds = range(40, 70)
+
+    def placements(randomisation):
+        env = FR5Env(task="grasp", config={"randomisation": {"enabled": True, **randomisation}})
+        try:
+            out = []
+            for seed in seeds:
+                env.reset(seed=seed)
+                position, _ = p.getBasePositionAndOrientation(env.world.object_id, physicsClientId=env.world.client)
+                out.append(position[:2])
+            return np.array(out)
+        finally:
+            env.close()
+
+    focused = placements({**focus, "placement_focus_share": 1.0})
+    assert np.all((focused[:, 0] >= -0.7) & (focused[:, 0] <= -0.6)), focused[:, 0]
+    assert np.ptp(focused[:, 1]) > 0.3  # the strip's whole width, not one point
+    uniform = placements({})
+    assert np.mean(uniform[:, 0] > -0.6) > 0.5  # most of the region is nearer than the strip
+    np.testing.assert_array_equal(placements({**focus, "placement_focus_share": 0.0}), uniform)
 
 
 def test_bad_config_through_gym_make():

@@ -202,9 +202,18 @@ class RandomisationConfig:
     gripper_latency_steps: Optional[List[int]]  # inclusive range drawn apart from the arm's, None: the arm's
     target_hidden_radius: float  # m, tcp to object centre within which a frame shows it hidden; 0: never
     response_time_constant_s: List[float]  # s per joint, [] none
+    placement_focus_share: float  # share of episodes whose object is placed in the focus region instead
+    placement_focus_low: List[float]  # (x, y) m, base_link
+    placement_focus_high: List[float]
 
     def check(self, source: str) -> None:
         check_time_constants("randomisation", "response_time_constant_s", self.response_time_constant_s)
+        if not 0.0 <= self.placement_focus_share <= 1.0:
+            raise ConfigError(f"randomisation.placement_focus_share: {self.placement_focus_share} must be in [0, 1]")
+        low, high = self.placement_focus_low, self.placement_focus_high
+        if len(low) != 2 or len(high) != 2 or any(lo >= hi for lo, hi in zip(low, high)):
+            raise ConfigError(f"randomisation.placement_focus_low {low} must be below placement_focus_high {high} "
+                              "(x y, metres, base_link)")
         if not 0.0 <= self.target_share <= 1.0:
             raise ConfigError(f"randomisation.target_share: {self.target_share} must be in [0, 1]")
         low, high = self.target_latency_s

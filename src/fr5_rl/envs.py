@@ -227,7 +227,13 @@ class FR5Env(gym.Env):
         rng = self.np_random
         self._apply_randomisation(rng)
         low, high = np.asarray(self.cfg.object.region_low), np.asarray(self.cfg.object.region_high)
-        xy = rng.uniform(low, high) if not options or "object_xy" not in options else np.asarray(options["object_xy"])
+        given = bool(options) and "object_xy" in options
+        xy = np.asarray(options["object_xy"]) if given else rng.uniform(low, high)
+        focus = self.cfg.randomisation
+        # Drawn only when on, so that with the focus off a seed places the same object as before.
+        if not given and focus.enabled and focus.placement_focus_share > 0.0 \
+                and rng.uniform() < focus.placement_focus_share:
+            xy = rng.uniform(np.asarray(focus.placement_focus_low), np.asarray(focus.placement_focus_high))
         self._object_start = (float(xy[0]), float(xy[1]), self._object_rest_z)
         self.world.place_object(self._object_start, yaw=float(rng.uniform(-np.pi, np.pi)))
 
