@@ -59,8 +59,9 @@ node waits for a new state (``~fresh_state_wait``), ROS gives chain 14 40/40 and
 (docs/experiments.md, "A period on the state before"). ``--state-jitter-ms`` delivers each state
 up to that late at random, so that some periods find no new one; with ``--fresh-state-wait-ms 0``
 the bench shows what that costs a model without the wait. It still ranks close models apart from
-ROS: chain 15 (models/grasp now) 588/600 here against chain 14's 596/600, where ROS gave chain 15
-120/120 and chain 14 117/120 (docs/experiments.md, "Chain 15").
+ROS: chain 15 588/600 here against chain 14's 596/600, where ROS gave chain 15 120/120 and chain 14
+117/120; chain 16 (models/grasp now) 593/600 here, 118/120 through ROS (docs/experiments.md,
+"Chain 15" and "Chain 16"). Differences of a few episodes in 600 are within chance on both.
 Target (issue #27): >= 90 % reach behind the FAIRINO profile.
 """
 import argparse
