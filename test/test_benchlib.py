@@ -371,3 +371,21 @@ def test_an_unknown_release_says_what_to_do(tmp_path, monkeypatch):
     with pytest.raises(reference.ReferenceUnavailable, match="--reference"):
         reference.reference_tree("0" * 40)
     assert len(reference.reference_release()) >= 7  # the file names a commit
+
+
+# ----------------------------------------------------------------------------- the rehearsal's timing
+def test_rehearsal_timing_summary_reads_the_nodes_fields():
+    import rehearsal
+
+    # The policy node's ~timing: period, inference, compute latency, joint state age, wait, repeated (s),
+    # each kept with the monotonic time it arrived; the camera's: render, convert, publish, age.
+    policy = [(float(k), 0.02, 0.001 * k, 0.002 * k, 0.003 * k, 0.0, 0.0) for k in range(1, 101)]
+    camera = [(0.1 * k, 0.03, 0.002, 0.001, 0.05 + 0.001 * k) for k in range(31)]  # 30 frames in 3 s
+    summary = rehearsal.timing_summary({"policy": policy, "camera": camera})
+    assert summary["inference"]["p50_ms"] == pytest.approx(50.5)
+    assert summary["compute_latency"]["max_ms"] == pytest.approx(200.0)
+    assert summary["joint_state_age"]["p99_ms"] == pytest.approx(297.03)
+    assert summary["camera_frames_per_s"] == pytest.approx(10.0)
+    assert summary["camera_frame_age"]["max_ms"] == pytest.approx(80.0)
+    without_camera = rehearsal.timing_summary({"policy": policy})
+    assert "camera_frames_per_s" not in without_camera and without_camera["compute_latency"]["samples"] == 100

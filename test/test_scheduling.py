@@ -1,4 +1,4 @@
-"""fr5_rl.ros.scheduling: a node's niceness reaches every thread it has and will have."""
+"""fr5_rl.ros.scheduling: a node's niceness (and SCHED_IDLE) reaches every thread it has and will have."""
 import os
 import subprocess
 import sys
@@ -49,3 +49,30 @@ def test_every_thread_before_and_after_takes_the_niceness():
 def test_niceness_outside_0_to_19_is_refused(nice):
     with pytest.raises(ValueError, match="0..19"):
         lower_priority(nice)
+
+
+IDLE_CHILD = textwrap.dedent("""
+    import os, threading
+    from fr5_rl.ros.scheduling import lower_priority, runs_idle
+
+    def policy():
+        return os.sched_getscheduler(threading.get_native_id())
+
+    stop = threading.Event()
+    seen = {}
+    early = threading.Thread(target=lambda: (stop.wait(), seen.__setitem__("before", policy())))
+    early.start()
+    print(runs_idle(), lower_priority(5, idle=True), runs_idle())
+    late = threading.Thread(target=lambda: seen.__setitem__("after", policy()))
+    late.start(); late.join()
+    stop.set(); early.join()
+    print(seen["before"] == os.SCHED_IDLE, seen["after"] == os.SCHED_IDLE, policy() == os.SCHED_IDLE)
+""")
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="SCHED_IDLE is Linux's")
+def test_idle_moves_every_thread_before_and_after_to_sched_idle():
+    result = subprocess.run([sys.executable, "-c", IDLE_CHILD], capture_output=True, text=True, check=True)
+    lines = [line.split() for line in result.stdout.split("\n") if line]
+    assert lines[0] == ["False", "5", "True"]  # normal before; niced and idle after
+    assert lines[1] == ["True", "True", "True"]  # a thread started before, one started after, the caller

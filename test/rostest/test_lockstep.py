@@ -2,7 +2,7 @@
 """rostest node: lockstep outcomes through ROS equal gym's, episode by episode.
 
 Params: ~model, ~episodes, ~seed (must match the launch). The gym episodes run here, in this
-process, on the same seeds; every node of the launch runs on /clock, so this test keeps time
+process, on the same seeds, with the policy node's own backend (``/fr5_policy/backend``); every node of the launch runs on /clock, so this test keeps time
 on the wall clock.
 """
 import json
@@ -26,7 +26,7 @@ class TestLockstep(unittest.TestCase):
         outcomes = []
         rospy.Subscriber("/fr5_sim/episode_outcome", String, lambda m: outcomes.append(json.loads(m.data)),
                          queue_size=50)
-        policy = load_policy(package_root() / model, "torch")
+        policy = load_policy(package_root() / model, rospy.get_param("/fr5_policy/backend"))
         gym = run_episodes(policy.task, policy.deployment_overrides(), lambda env: (policy.act, None), list(range(seed, seed + episodes)))
         deadline = time.monotonic() + 240.0
         while len(outcomes) < episodes and time.monotonic() < deadline and not rospy.is_shutdown():

@@ -14,8 +14,12 @@ Chains (``--chains``):
   policy on the simulator's true pose (``vision_target:=truth``): what the camera's target costs
   apart from the machine time the camera takes.
 
-Prints and writes ``rehearsal.json``: per model and chain, K/N with its 95 % Wilson interval and
-the failure causes and the seeds.
+Prints and writes ``rehearsal.json``: per model and chain, K/N with its 95 % Wilson interval,
+the failure causes and the seeds, and the policy node's own timing (``/fr5_policy/timing``:
+inference, and compute latency from the period's start to its command).
+
+``--backend`` picks the policy node's backend: ``onnx`` (the default of both launches: what a
+real cell runs) or ``torch``.
 
     python tools/bench/rehearsal.py --models models/reach --chains fairino_vision --episodes 20 --seed 900000
 """
@@ -23,16 +27,22 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
-from benchlib import REPO, RESULTS_DIR, machine_info, update_summary, write_result
+from benchlib import REPO, RESULTS_DIR, latency_ms, machine_info, update_summary, write_result
 from fr5_rl.deploy.bundle import read_meta
 from fr5_rl.env_config import load_env_config
 from fr5_rl.envs import FR5Env
 from fr5_rl.training.evaluation import wilson_interval
 from fr5_rl.training.success_map import write_success_map
 from roslaunch_run import run_launch
+
+# Fields of the policy node's ~timing (policy_node.py): period, inference, compute latency,
+# joint state age, fresh-state wait, repeated (s; the last a flag).
+TIMING_FIELDS = {"inference": 1, "compute_latency": 2, "joint_state_age": 3}
+
 
 def placed(records: List[Dict[str, Any]], task: str) -> List[Dict[str, Any]]:
     """The records with the object's start position of each seed (the simulator's env places it
@@ -59,6 +69,38 @@ CHAINS = {
 }
 
 
+def timing_listener(samples: Dict[str, List[Tuple[float, ...]]]) -> Callable[[], List[Any]]:
+    """A ``run_launch`` listener that appends every ``/fr5_policy/timing`` message to
+    ``samples["policy"]`` and every ``/camera/timing`` one (render, convert, publish, the
+    rendered state's age at publishing; s) to ``samples["camera"]``."""
+
+    def listen() -> List[Any]:
+        import rospy
+        from std_msgs.msg import Float64MultiArray
+
+        def keep(key: str) -> Callable[[Any], None]:
+            return lambda message: samples.setdefault(key, []).append((time.monotonic(), *message.data))
+        return [rospy.Subscriber("/fr5_policy/timing", Float64MultiArray, keep("policy"), queue_size=1000),
+                rospy.Subscriber("/camera/timing", Float64MultiArray, keep("camera"), queue_size=1000)]
+    return listen
+
+
+def timing_summary(samples: Dict[str, List[Tuple[float, ...]]]) -> Dict[str, Any]:
+    """The policy node's inference, compute latency and joint state age over a run (ms), and,
+    with a camera, its frames per second and each frame's age when published (ms)."""
+    policy = samples.get("policy", [])
+    summary: Dict[str, Any] = {name: latency_ms((sample[index + 1] for sample in policy if len(sample) > index + 1),
+                                                points=(50, 90, 99), digits=2)
+                               for name, index in TIMING_FIELDS.items()}
+    camera = samples.get("camera", [])
+    if len(camera) > 1:
+        span = camera[-1][0] - camera[0][0]
+        summary["camera_frames_per_s"] = round((len(camera) - 1) / span, 2) if span > 0 else None
+        summary["camera_frame_age"] = latency_ms((sample[4] for sample in camera if len(sample) > 4),
+                                                 points=(50, 90, 99), digits=1)
+    return summary
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -66,6 +108,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--chains", nargs="+", choices=sorted(CHAINS), default=["fairino", "fairino_vision"])
     parser.add_argument("--episodes", type=int, default=20)
     parser.add_argument("--seed", type=int, default=900_000, help="episode k places the object with seed + k")
+    parser.add_argument("--backend", choices=("onnx", "torch"), default="onnx",
+                        help="the policy node's backend (default onnx, as both launches)")
     parser.add_argument("--port", type=int, default=11470)
     parser.add_argument("--results", type=Path, default=RESULTS_DIR)
     parser.add_argument("--maps", action="store_true",
@@ -78,27 +122,34 @@ def main(argv: Optional[List[str]] = None) -> int:
         task = read_meta(Path(model) if Path(model).is_absolute() else REPO / model)["task"]
         for chain in args.chains:
             arguments = {"rviz": False, "model": model, "task": task, "episodes": args.episodes,
-                         "seed": args.seed, **CHAINS[chain]}
+                         "seed": args.seed, "backend": args.backend, **CHAINS[chain]}
             if arguments.get("driver") == "fairino":
                 # The emulated controller's port follows the master's: a second rehearsal on the
                 # machine (another bench, a rostest) must not drive this one's gripper.
                 arguments["controller_port"] = args.port + 36000
-            run = run_launch(arguments, port=args.port, episodes=args.episodes)
+            samples: Dict[str, List[Tuple[float, ...]]] = {}
+            run = run_launch(arguments, port=args.port, episodes=args.episodes, listen=timing_listener(samples),
+                             node_name="bench_rehearsal")
             causes: Dict[str, int] = {}
             for cause in run.failures:
                 causes[cause] = causes.get(cause, 0) + 1
             row = {"model": model, "chain": chain, "successes": run.successes, "episodes": run.episodes,
                    "success_rate_95ci": [round(bound, 3) for bound in wilson_interval(run.successes, run.episodes)], "failures": causes,
                    "seeds": [args.seed, args.seed + args.episodes - 1], "wall_s": round(run.wall_s, 1),
-                   "timed_out": run.timed_out, "records": run.records}
+                   "timed_out": run.timed_out, "backend": args.backend,
+                   "policy_timing": timing_summary(samples), "records": run.records}
             rows.append(row)
             if args.maps and run.records:
                 stem = args.results / f"map_{Path(model).name}_{chain}"
                 title = f"{model} through the {chain} chain, ROS rehearsal ({run.episodes} episodes)"
                 for written in write_success_map(placed(run.records, task), load_env_config(), stem, title):
                     print(f"wrote {written}")
+            compute = row["policy_timing"]["compute_latency"]
+            camera = (f", camera {row['policy_timing']['camera_frames_per_s']} frames/s"
+                      if "camera_frames_per_s" in row["policy_timing"] else "")
             print(f"{model:24s} {chain:15s} {run.successes}/{run.episodes}  95% CI {row['success_rate_95ci']}  "
-                  f"failures {causes or '-'}  ({run.wall_s:.0f} s)", flush=True)
+                  f"failures {causes or '-'}  ({run.wall_s:.0f} s; {args.backend}, compute latency p50/p99 "
+                  f"{compute['p50_ms']}/{compute['p99_ms']} ms{camera})", flush=True)
     args.results.mkdir(parents=True, exist_ok=True)
     path = args.results / "rehearsal.json"
     write_result(path, {"bench": "rehearsal", "machine": machine_info(), "episodes": args.episodes,

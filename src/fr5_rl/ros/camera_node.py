@@ -113,6 +113,7 @@ class CameraNodeParams:
     frames_config: str
     mount_offset: List[float]
     nice: int
+    idle: bool
     joint_states_topic: str
     object_topic: str
     color_topic: str
@@ -170,7 +171,7 @@ class CameraNode:
         # Before the renderer starts its threads (they inherit it): the camera stands in for
         # hardware, so it must never take the CPU from the loop it feeds (the simulator's
         # joint states, the policy's commands). When the CPU is short, frames come less often.
-        lower_priority(params.nice)
+        lower_priority(params.nice, idle=params.idle)
         self.intrinsics = params.intrinsics()
         spec = load_robot_spec()
         render_pose, camera_frames = params.transforms()

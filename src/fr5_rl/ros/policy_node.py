@@ -24,6 +24,7 @@ time a period waits, up to ``~fresh_state_wait``, for a joint state no period ac
 """
 from __future__ import annotations
 
+import gc
 import threading
 import time
 from collections import deque
@@ -404,5 +405,10 @@ def main() -> int:
     except (ConfigError, ModelFilesError) as error:
         rospy.logfatal(f"policy_node: {error}")
         return 1
+    # The start-up's objects (modules, the model, rospy) live as long as the node: out of the
+    # collector's reach, a full collection walks only what the loop allocates (offline: a
+    # 24 ms pause with onnxruntime loaded, 0.7 ms frozen; with torch, over 320,000 objects).
+    gc.collect()
+    gc.freeze()
     rospy.spin()
     return 0
