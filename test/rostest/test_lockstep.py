@@ -2,8 +2,8 @@
 """rostest node: lockstep outcomes through ROS equal gym's, episode by episode.
 
 Params: ~model, ~episodes, ~seed (must match the launch). The gym episodes run here, in this
-process, on the same seeds, with the policy node's own backend (``/fr5_policy/backend``); every node of the launch runs on /clock, so this test keeps time
-on the wall clock.
+process, on the same seeds, with the policy node's own backend (``/fr5_policy/backend``); every
+node of the launch runs on /clock, so this test keeps time on the wall clock.
 """
 import json
 import time

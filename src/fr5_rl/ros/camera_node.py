@@ -54,7 +54,7 @@ from ..sim.camera import RENDERERS, SimulatedCamera, depth_to_millimetres
 from ..transforms import load_transform_files, transform_in
 from .images import camera_info_message, image_message
 from .params import exit_if_help_asked, node_parameters
-from .scheduling import lower_priority
+from .scheduling import lower_priority, runs_idle
 from .static_transforms import to_messages
 
 
@@ -205,7 +205,8 @@ class CameraNode:
         rospy.Subscriber(params.object_topic, Marker, self.on_object, queue_size=5, tcp_nodelay=True)
         rospy.loginfo(f"camera_node: {params.width}x{params.height} at up to {params.rate:g} Hz, "
                       f"{self.camera.renderer} renderer, frame {params.frame_id}, "
-                      f"{'publishing' if params.publish_tf else 'not publishing'} its tf")
+                      f"{'publishing' if params.publish_tf else 'not publishing'} its tf, niceness {params.nice}"
+                      f"{' and SCHED_IDLE' if runs_idle() else ''}")
 
     def on_joint_state(self, message: JointState) -> None:
         with self.lock:
