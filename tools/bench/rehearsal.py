@@ -35,13 +35,13 @@ from benchlib import REPO, RESULTS_DIR, latency_ms, machine_info, update_summary
 from fr5_rl.deploy.bundle import read_meta
 from fr5_rl.env_config import load_env_config
 from fr5_rl.envs import FR5Env
+from fr5_rl.ros.policy_node import TIMING_FIELDS
 from fr5_rl.training.evaluation import wilson_interval
 from fr5_rl.training.success_map import write_success_map
 from roslaunch_run import run_launch
 
-# Fields of the policy node's ~timing (policy_node.py): period, inference, compute latency,
-# joint state age, fresh-state wait, repeated (s; the last a flag).
-TIMING_FIELDS = {"inference": 1, "compute_latency": 2, "joint_state_age": 3}
+# The policy node's ~timing fields this bench summarises (policy_node.TIMING_FIELDS gives their order).
+SUMMARISED = ("inference", "compute_latency", "joint_state_age")
 
 
 def placed(records: List[Dict[str, Any]], task: str) -> List[Dict[str, Any]]:
@@ -89,9 +89,11 @@ def timing_summary(samples: Dict[str, List[Tuple[float, ...]]]) -> Dict[str, Any
     """The policy node's inference, compute latency and joint state age over a run (ms), and,
     with a camera, its frames per second and each frame's age when published (ms)."""
     policy = samples.get("policy", [])
-    summary: Dict[str, Any] = {name: latency_ms((sample[index + 1] for sample in policy if len(sample) > index + 1),
-                                                points=(50, 90, 99), digits=2)
-                               for name, index in TIMING_FIELDS.items()}
+    summary: Dict[str, Any] = {}
+    for name in SUMMARISED:
+        index = TIMING_FIELDS.index(name) + 1  # each sample starts with its arrival time
+        summary[name] = latency_ms((sample[index] for sample in policy if len(sample) > index),
+                                   points=(50, 90, 99), digits=2)
     camera = samples.get("camera", [])
     if len(camera) > 1:
         span = camera[-1][0] - camera[0][0]

@@ -82,7 +82,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     rospy.signal_shutdown("done")
     for process in busy:
         process.kill()
-    timing = np.array(samples[5:]) if len(samples) > 5 else np.zeros((0, 6))  # skip start-up cycles
+    from fr5_rl.ros.policy_node import TIMING_FIELDS
+
+    timing = np.array(samples[5:]) if len(samples) > 5 else np.zeros((0, len(TIMING_FIELDS)))  # skip start-up cycles
     control_dt = float(meta.get("control_dt", 0.02))
 
     from fr5_rl.deploy.policy import load_policy
@@ -93,6 +95,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     gym_rate = sum(r["success"] for r in records) / len(records)
     ros_rate = successes / episodes if episodes else 0.0
 
+    def column(name: str) -> np.ndarray:
+        return timing[:, TIMING_FIELDS.index(name)]
+
     def timing_ms(seconds) -> Optional[Dict[str, Any]]:
         return latency_ms(seconds, digits=4) if len(timing) else None
 
@@ -102,13 +107,13 @@ def main(argv: Optional[List[str]] = None) -> int:
         "seeds": [args.seed, args.seed + args.episodes - 1],
         "ros_success_rate": ros_rate, "gym_success_rate_same_seeds": gym_rate,
         "parity_gap_points": round(100 * abs(ros_rate - gym_rate), 1),
-        "loop_period": timing_ms(timing[:, 0]),
-        "period_jitter": timing_ms(np.abs(timing[:, 0] - control_dt)),
-        "inference": timing_ms(timing[:, 1]),
-        "compute_latency": timing_ms(timing[:, 2]),
-        "joint_state_age_at_command": timing_ms(timing[:, 3]),
-        "new_state_wait": timing_ms(timing[:, 4]),
-        "repeated_joint_state_share": round(float(timing[:, 5].mean()), 4) if len(timing) else None,
+        "loop_period": timing_ms(column("loop_period")),
+        "period_jitter": timing_ms(np.abs(column("loop_period") - control_dt)),
+        "inference": timing_ms(column("inference")),
+        "compute_latency": timing_ms(column("compute_latency")),
+        "joint_state_age_at_command": timing_ms(column("joint_state_age")),
+        "new_state_wait": timing_ms(column("new_state_wait")),
+        "repeated_joint_state_share": round(float(column("repeated").mean()), 4) if len(timing) else None,
         "targets": dict(TARGETS),
     }
     verdicts = ros_verdicts(result)

@@ -57,6 +57,11 @@ TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.Ext
              tf2_ros.InvalidArgumentException)
 
 
+# The fields of each ~timing message, in order (s; "repeated" is 1.0 or 0.0): one place for the
+# node, its diagnostics and the benches that listen to it.
+TIMING_FIELDS = ("loop_period", "inference", "compute_latency", "joint_state_age", "new_state_wait", "repeated")
+
+
 @dataclass(frozen=True)
 class PolicyNodeParams:
     """``config/policy_node.yaml``: the policy node's ~private parameters."""
@@ -383,9 +388,8 @@ class PolicyNode:
             status.level, status.message = DiagnosticStatus.WARN, f"holding: {hold}"
         else:
             status.level, status.message = DiagnosticStatus.OK, "running"
-        samples = np.array(self.timing) if self.timing else np.zeros((0, 6))
-        for column, name in enumerate(("loop_period", "inference", "compute_latency", "joint_state_age",
-                                       "new_state_wait")):
+        samples = np.array(self.timing) if self.timing else np.zeros((0, len(TIMING_FIELDS)))
+        for column, name in enumerate(TIMING_FIELDS[:-1]):  # durations; "repeated" is a flag
             if len(samples):
                 values = samples[:, column] * 1000.0
                 status.values.append(KeyValue(f"{name}_p50_ms", f"{np.nanpercentile(values, 50):.3f}"))
