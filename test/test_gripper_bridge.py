@@ -356,6 +356,25 @@ def test_error_code_is_reported_and_retried_with_growing_backoff(controller, dri
     assert controller.requests().count(activate(params)) == 1  # the link never dropped
 
 
+def test_the_worker_clears_the_fault_when_the_activation_settles(controller):
+    """On the real clock, with nothing to send or read: the worker wakes for the settle alone."""
+    params = make_params(controller_url=controller.url, activation_settle=0.3)
+    heard: List[Tuple[float, bool]] = []
+    bridge = GripperBridge(params, MAX_WIDTH, report=Events(),
+                           on_fault=lambda fault: heard.append((time.monotonic(), fault)))
+    started = time.monotonic()
+    bridge.start()
+    try:
+        deadline = started + 10.0  # a guard against a hang, not a measurement
+        while not heard and time.monotonic() < deadline:
+            time.sleep(0.01)
+    finally:
+        bridge.stop()
+    assert [fault for _, fault in heard] == [False], f"the fault never cleared: {bridge.status()}"
+    assert heard[0][0] - started >= params.activation_settle
+    assert controller.requests() == activation(params)  # no request was needed to clear it
+
+
 def test_backoff_schedule_and_activation_settle_on_a_fake_clock():
     """The exact retry times, cap included, with an in-process controller."""
     clock = FakeClock(99.9)  # the activation, one 10 Hz call slot after the reset, at 100.0 s: no float drift
@@ -389,6 +408,37 @@ def test_backoff_schedule_and_activation_settle_on_a_fake_clock():
                                                Call("ActGripper", (params.gripper_index, 1)),
                                                Call("MoveGripper", (params.gripper_index, 50, params.velocity_percent,
                                                                     params.force_percent, params.max_time_ms, 1))]
+
+
+def test_the_fault_holds_until_the_activation_has_settled_on_a_fake_clock():
+    """A gripper that is answered but not activated, or still settling, cannot act on a width:
+    the fault stays true until activation_settle is over, and then clears by itself, without a
+    request (no read-back, no probe, no width here)."""
+    clock = FakeClock(100.0)
+    client = ScriptedController(clock)
+    heard: List[Tuple[float, bool]] = []
+    params = make_params(reset_settle=1.0, activation_settle=2.0)
+    bridge = GripperBridge(params, MAX_WIDTH, report=Events(), client=client, clock=clock,
+                           on_fault=lambda fault: heard.append((clock.now, fault)))
+    assert bridge.poll() == "reset" and bridge.status().connected and bridge.status().fault
+    clock.advance(1.0)
+    assert bridge.poll() == "activate" and bridge.status().activated
+    assert bridge.status().fault and heard == []  # activated, not settled
+    clock.advance(1.999)
+    assert bridge.poll() is None and heard == []
+    clock.advance(0.001)
+    assert bridge.poll() is None  # nothing to send: the clear needs no request
+    assert heard == [(103.0, False)] and not bridge.status().fault
+    assert [c.method for _, c in client.made] == ["ActGripper", "ActGripper"]
+
+
+def test_binary_mode_has_no_activation_to_wait_for():
+    clock = FakeClock(100.0)
+    heard: List[bool] = []
+    bridge = GripperBridge(make_params(mode="binary", activation_settle=2.0), MAX_WIDTH, report=Events(),
+                           client=ScriptedController(clock), clock=clock, on_fault=heard.append)
+    bridge.submit(0.0)
+    assert bridge.poll() == "switch" and heard == [False]
 
 
 def test_timeout_is_an_error_and_the_newest_width_follows_once_the_controller_answers(controller, drive):

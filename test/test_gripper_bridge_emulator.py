@@ -16,7 +16,7 @@ import pytest
 from fr5_rl.drivers.fr5_xmlrpc import ControllerClient
 from fr5_rl.drivers.gripper_bridge import GripperReading
 from fr5_rl.sim.controller_emulator import ControllerEmulator, ControllerEmulatorSettings
-from test_gripper_bridge import MAX_WIDTH, Driven, FakeClock, make_params
+from test_gripper_bridge import MAX_WIDTH, WITHIN_A_TICK, Driven, FakeClock, make_params
 
 TRANSIENT = 0.1  # s the emulated controller reads 0 after a move (the field report)
 
@@ -129,12 +129,26 @@ def test_without_the_debounce_the_transient_zero_would_be_published(cell):
     assert any(r.width == 0.0 for r in c.readings) and c.bridge.status().ignored_zero_readings == 0
 
 
+def test_no_width_reaches_the_fingers_while_the_fault_holds(cell):
+    """The vendor's timings (reset, 1 s, activate, 2 s): the fault clears when the first
+    MoveGripper may go out, so a policy that holds on the fault never commands fingers that
+    cannot follow. The read-back runs from the activation on and shows them where they stand."""
+    c = cell([6], reset_settle=1.0, activation_settle=2.0)
+    c.emulator.set_measured_width(MAX_WIDTH, moving=False)
+    c.bridge.submit(0.0)  # a close asked for at once
+    took = c.run.run_until(lambda: c.faults == [False], 5.0, "the fault to clear")
+    assert took == pytest.approx(3.0, abs=WITHIN_A_TICK)
+    moves = c.run.recorder.times("MoveGripper")
+    assert moves and moves[0] >= c.clock.now - WITHIN_A_TICK  # the first move goes out as it clears
+    assert c.readings and all(r.width == pytest.approx(MAX_WIDTH) for r in c.readings)  # open until then
+
+
 def test_the_fault_state_follows_gripper_faults_and_the_link(cell):
     c = cell([6], retry_initial=0.05, retry_max=0.1)
     c.emulator.set_measured_width(0.04, moving=False)
     assert c.bridge.status().fault  # nothing heard yet
-    c.run.run_until(lambda: c.faults == [False], 1.0, "the first reply to clear the fault")
-    c.run.run_until(lambda: c.bridge.status().activated, 1.0, "activation")
+    c.run.run_until(lambda: c.faults == [False], 1.0, "the activation to clear the fault")
+    assert c.bridge.status().activated
     c.emulator.set_gripper_fault(5)
     c.run.run_until(lambda: c.faults[-1:] == [True], 1.0, "the gripper fault")
     assert c.bridge.status().gripper_fault == 5 and c.bridge.status().connected

@@ -19,7 +19,10 @@ a stream of opening widths (m) into those calls:
   (outside the command rate limit); the controller's transient 0 right after a ``MoveGripper`` is
   ignored for ``zero_debounce`` s, and each accepted reading goes to ``on_reading`` as a
   :class:`GripperReading` (width in m);
-- ``on_fault`` hears whenever "the controller reports a gripper fault or is unreachable" changes.
+- ``on_fault`` hears whenever "the gripper cannot act on a width now" changes: the controller is
+  unreachable (or not heard yet) or reports a gripper fault, or, in position mode, the gripper is
+  not activated or its activation has not settled (``activation_settle``). A policy that holds on
+  the fault therefore does not start before the fingers can follow it.
 
 The clock and the controller client can be injected, and :meth:`GripperBridge.poll` runs one
 due step on the caller's thread, so tests can drive it without the worker.
@@ -153,7 +156,8 @@ class BridgeStatus:
     :param clamped_inputs: widths clamped into 0 … max opening.
     :param gripper_fault: the ``fault`` of the last ``GetGripperMotionDone`` / ``GetGripperCurPosition``
         (position mode), if any.
-    :param fault: what the fault topic says: the controller is unreachable or reports a gripper fault.
+    :param fault: what the fault topic says: the gripper cannot act on a width now (the controller
+        is unreachable or reports a gripper fault; position mode: not activated, or settling).
     :param measured_width: the latest accepted read-back (m), None before the first.
     :param readings: read-backs accepted.
     :param ignored_zero_readings: transient 0 readings ignored right after a move.
@@ -224,6 +228,7 @@ class GripperBridge:
         self.connected = False
         self.reset_at: Optional[float] = None  # when ActGripper(index, 0) succeeded since the last loss
         self.activated = False
+        self.ready_at: Optional[float] = None  # position mode: when the activation has settled
         self.sent: Union[int, str, None] = None
         self.last_error = ""
         self.calls = self.failures = 0
@@ -281,7 +286,7 @@ class GripperBridge:
                                 last_sent=self.sent, last_error=self.last_error, calls=self.calls,
                                 failures=self.failures, retry_in=round(retry_in, 3), dropped_inputs=self.dropped,
                                 clamped_inputs=self.clamped, gripper_fault=self.gripper_fault,
-                                fault=self._fault_active(),
+                                fault=self._fault_active(self.clock()),
                                 measured_width=None if self.measured is None else round(self.measured.width, 6),
                                 readings=self.readings, ignored_zero_readings=self.ignored_zeros)
 
@@ -306,11 +311,17 @@ class GripperBridge:
                     if self.stopping:
                         return
                     now = self.clock()
+                    fault_changed = self._fault_change(now)
                     step, due = self._next_step(now)
-                    if step is not None and due <= now:
+                    if fault_changed is not None or (step is not None and due <= now):
                         break
-                    # Woken early by submit() (new width) or stop(); otherwise when the step is due.
-                    self.lock.wait(None if step is None else due - now)
+                    # Woken early by submit() (new width) or stop(); otherwise when the step is
+                    # due or the activation settles (the fault clears without a request).
+                    wake = [t for t in (due if step is not None else None, self._settles_at(now)) if t is not None]
+                    self.lock.wait(min(wake) - now if wake else None)
+            if fault_changed is not None:
+                self._tell_fault(fault_changed)
+                continue
             self._do(step)
 
     def poll(self) -> Optional[str]:
@@ -319,9 +330,12 @@ class GripperBridge:
         :return: the kind of step run (``reset``, ``activate``, ``move``, ``switch``, ``read``, ``probe``) or None.
         """
         with self.lock:
+            fault_changed = self._fault_change(self.clock())
             step, due = self._next_step(self.clock())
-            if step is None or due > self.clock():
-                return None
+        if fault_changed is not None:
+            self._tell_fault(fault_changed)
+        if step is None or due > self.clock():
+            return None
         self._do(step)
         return step
 
@@ -333,9 +347,34 @@ class GripperBridge:
             return None
         return width_to_percent(self.width, self.max_width, self.params.invert_percent)
 
-    def _fault_active(self) -> bool:
-        """The fault topic's value: the controller is unreachable (or not heard yet) or reports a gripper fault."""
-        return not self.connected or bool(self.gripper_fault)
+    def _fault_active(self, now: float) -> bool:
+        """The fault topic's value: the gripper cannot act on a width now. The controller is
+        unreachable (or not heard yet) or reports a gripper fault; in position mode also before
+        ``ActGripper`` succeeded and until ``activation_settle`` after it, when a ``MoveGripper``
+        would not be sent yet (the real gripper may still be moving through its activation).
+
+        :param now: the clock's time (s).
+        """
+        if not self.connected or self.gripper_fault:
+            return True
+        return self.params.mode == "position" and (not self.activated or self.ready_at is None or now < self.ready_at)
+
+    def _settles_at(self, now: float) -> Optional[float]:
+        """When the activation settles (s), if that is still to come; None otherwise."""
+        return self.ready_at if self.activated and self.ready_at is not None and self.ready_at > now else None
+
+    def _fault_change(self, now: float) -> Optional[bool]:
+        """The fault's new value if it differs from what ``on_fault`` last heard (recorded as heard), else None."""
+        fault = self._fault_active(now)
+        if fault == self.fault_reported:
+            return None
+        self.fault_reported = fault
+        return fault
+
+    def _tell_fault(self, fault: bool) -> None:
+        """``on_fault`` (no lock held: a slow publisher must not hold up submit() or status())."""
+        if self.on_fault is not None:
+            self.on_fault(fault)
 
     def _command_step(self, earliest: float) -> Tuple[Optional[str], float]:
         """The next command (reset, activate, move, switch) and when it is due, or (None, 0).
@@ -457,13 +496,12 @@ class GripperBridge:
                 self._refused(step, error, now)
             else:
                 self._lost(error, now)
-            fault = self._fault_active()
-            fault_changed, self.fault_reported = fault != self.fault_reported, fault
+            fault_changed = self._fault_change(now)
         # Callbacks outside the lock: a slow publisher must not hold up submit() or status().
         if accepted is not None and self.on_reading is not None:
             self.on_reading(accepted)
-        if fault_changed and self.on_fault is not None:
-            self.on_fault(fault)
+        if fault_changed is not None:
+            self._tell_fault(fault_changed)
 
     def _read(self, reading: Tuple[int, float], stamp: float) -> Optional[GripperReading]:
         """Record a ``GetGripperCurPosition`` reply; returns the reading unless it is the transient 0.
@@ -513,7 +551,8 @@ class GripperBridge:
         elif step == "activate":
             self.activated = True
             self.sent = None  # activation may move the fingers: the position must be sent again
-            self.not_before = max(self.not_before, now + self.params.activation_settle)
+            self.ready_at = now + self.params.activation_settle
+            self.not_before = max(self.not_before, self.ready_at)
         elif step == "probe":
             fault = motion_done_fault(values)
             if self.params.mode == "position" and fault is not None:

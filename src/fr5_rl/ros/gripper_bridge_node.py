@@ -12,8 +12,10 @@ In position mode the bridge reads the fingers back (``GetGripperCurPosition``, S
 ``~readback_rate``, ignores the controller's transient 0 right after a move (``~zero_debounce``)
 and publishes ``~joint_states_topic`` (sensor_msgs/JointState: the two finger joints of
 config/robot.yaml, each at width / 2, no velocities, stamped at the read). ``~fault_topic``
-(std_msgs/Bool, latched) is true while the controller is unreachable (or not yet heard) or
-reports a gripper fault.
+(std_msgs/Bool, latched) is true while the gripper cannot act on a width: the controller is
+unreachable (or not yet heard) or reports a gripper fault, or (position mode) the gripper is
+not yet activated or its activation has not settled (``~activation_settle``). The policy node
+holds on it, so a policy does not start before the fingers can follow it.
 
 The bridge's state goes to ``~status`` (std_msgs/String, JSON: mode, connected, last_error,
 last_sent, calls, failures, ...) and ``/diagnostics`` at ``~status_rate``. Errors go to the
@@ -45,7 +47,7 @@ class GripperBridgeNode:
         max_width, self.finger_names = spec.max_opening_width, list(spec.finger_joint_names)
         self.joint_states_pub = rospy.Publisher(params.joint_states_topic, JointState, queue_size=10)
         self.fault_pub = rospy.Publisher(params.fault_topic, Bool, queue_size=1, latch=True)
-        self.fault_pub.publish(Bool(data=True))  # nothing heard from the controller yet
+        self.fault_pub.publish(Bool(data=True))  # the gripper cannot act yet: not heard from, not activated
         self.bridge = GripperBridge(params, max_width, report=log_to_rosout, on_reading=self.publish_fingers,
                                     on_fault=self.publish_fault)
         self.status_pub = rospy.Publisher("~status", String, queue_size=1, latch=True)
@@ -75,7 +77,7 @@ class GripperBridgeNode:
             rospy.logwarn(f"gripper_bridge: gripper fault on {rospy.resolve_name(self.params.fault_topic)} "
                           f"(~status: {self.bridge.status().last_error or 'gripper fault reported'})")
         else:
-            rospy.loginfo(f"gripper_bridge: gripper fault cleared on {rospy.resolve_name(self.params.fault_topic)}")
+            rospy.loginfo(f"gripper_bridge: the gripper can act: fault cleared on {rospy.resolve_name(self.params.fault_topic)}")
 
     def publish_status(self, _event: rospy.timer.TimerEvent) -> None:
         status = self.bridge.status()
