@@ -43,7 +43,12 @@ def test_the_fairino_profile_is_the_rehearsals_chain():
     run, env = emulation("fairino")
     try:
         assert run.chain == timing.Chain("bridge", "positions", "go_to_start", publish_velocities=False)
-        assert run.bridge.status().activated  # reset and activation ran before the first episode
+        # Reset, activation and its settle ran before the first episode, as the policy node holds
+        # on the bridge's fault until then: the first episode starts with a gripper that can act.
+        status = run.bridge.status()
+        assert status.activated and not status.fault and run.fault is None
+        settle = run.bridge.params.reset_settle + run.bridge.params.activation_settle
+        assert run.clock.now >= settle
         first = run.run_episode(930_000)
         # Leave the arm far from the start, as an operator might: the next episode must begin
         # with the guard's slow move back, not a teleport.
@@ -137,5 +142,5 @@ def test_late_joint_states_repeat_in_some_periods_unless_the_node_waits_for_a_ne
             repeated[wait_s] = run.repeated_states / run.periods
         finally:
             env.close()
-    assert repeated[0.0] > 0.1
+    assert repeated[0.0] > 0.05  # about one period in ten on these four episodes
     assert repeated[0.015] < 0.1 * repeated[0.0]
