@@ -202,7 +202,9 @@ class PolicyNode:
 
     def on_gripper_fault(self, message: Bool) -> None:
         with self.inputs_changed:
-            self.gripper_fault = f"{self.params.gripper_fault_topic} is true" if message.data else None
+            # True also while the bridge activates the gripper (about 3 s after it starts).
+            self.gripper_fault = (f"{self.params.gripper_fault_topic} is true (not yet activated, unreachable or "
+                                  "faulted: the gripper bridge's ~status says which)" if message.data else None)
 
     def on_enable(self, request) -> SetBoolResponse:
         with self.inputs_changed:
