@@ -517,8 +517,9 @@ def test_finger_widths_merge_the_arm_and_gripper_topics_by_name():
     arm = list(spec.joint_names)
     widths.add(arm, [0.0] * 6, [0.0] * 6, 10.0, 1.0)
     widths.add([left], [0.01], [], 10.01, 1.01)
-    assert widths.at(10.0) is None  # the other finger not heard of yet
+    assert widths.at(10.0) is None and not widths.heard()  # the other finger not heard of yet
     widths.add([right, left], [0.015, 0.02], [], 10.02, 1.02)
+    assert widths.heard() and widths.at(10.5) is None  # a gap in the read-back, not a missing gripper
     widths.add(arm, [0.1] * 6, [0.0] * 6, 10.03, 1.03)
     assert list(widths.widths) == [(10.02, 0.02 + 0.015)]
     widths.add([left], [0.005], [], 10.04, 1.04)  # one finger: merged with the other's last value

@@ -133,6 +133,11 @@ class FingerWidths:
                 return  # not every finger heard of yet
             self.widths.append((reading.stamp, reading.value.gripper_width))
 
+    def heard(self) -> bool:
+        """Whether any opening was taken (else no finger joints arrive at all)."""
+        with self.lock:
+            return bool(self.widths)
+
     def at(self, stamp: float) -> Optional[float]:
         """The opening (m) nearest ``stamp`` (s) within 0.1 s; None when unknown."""
         with self.lock:
@@ -253,7 +258,10 @@ class DetectorNode:
         """
         tcp = self.tcp_at(stamp)
         width = self.widths.at(stamp.to_sec())
-        if (tcp is None or width is None) and not self.warned_no_hand \
+        # A gripper read back at 10 Hz leaves frames with no opening within 0.1 s (after a move the
+        # controller's transient 0 is skipped): that is a gap, not a missing driver.
+        missing_fingers = width is None and not self.widths.heard()
+        if (tcp is None or missing_fingers) and not self.warned_no_hand \
                 and time.monotonic() - self.started > self.params.startup_grace:
             missing = (f"tf {self.params.table_frame} <- {self.params.tcp_frame} (robot_state_publisher?)"
                        if tcp is None else f"finger joints on {', '.join(self.params.joint_states_topics)} (gripper driver?)")
