@@ -37,8 +37,8 @@ test-fast: setup
 # FAIRINO driver's timing emulated over 200 episodes, lockstep
 # against gym over 200 seeds per model, time to solve reach; env speed and time to solve also
 # against the previous release's code (tools/bench/reference_release.yaml), in the same run.
-# BENCH_ARGS=--quick for a smoke run; `make bench-grasp` adds the grasp time to solve and PPO's
-# grasp training speed against the release (~25 min).
+# BENCH_ARGS=--quick for a smoke run; `make bench-grasp` adds the grasp times to solve: DAgger's,
+# and PPO's from reward against the release on the same seed (~50 min on 2 cores).
 bench: setup
 	@$(ENV) python tools/bench/ros_loop.py
 	@$(ENV) python tools/bench/ros_loop.py --busy-cores 1
@@ -56,7 +56,7 @@ bench-ray: setup
 
 bench-grasp: setup
 	@$(ENV) python tools/bench/time_to_solve.py --task grasp
-	@$(ENV) python tools/bench/train_speed.py --task grasp
+	@$(ENV) python tools/bench/time_to_solve.py --task grasp-from-reward
 	@$(ENV) python tools/bench/ros_loop.py --model models/grasp --episodes 20
 	@$(ENV) python tools/bench/env_and_inference.py --skip-env --model models/grasp --results bench/results/grasp
 

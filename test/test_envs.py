@@ -367,7 +367,7 @@ def test_scripted_downward_motion_into_table_is_a_collision():
         for _step in range(200):
             q = env.joint_positions()
             tcp, _ = env.kinematics.tcp_pose(q)
-            q_target = expert._inverse_kinematics(tcp + np.array([0.0, 0.0, -0.02]))
+            q_target = expert._inverse_kinematics(tcp + np.array([0.0, 0.0, -0.02]), q)
             delta = (q_target - q) / max_step
             action = np.append(delta / max(1.0, np.abs(delta).max()), 1.0)
             _, _, terminated, truncated, info = env.step(action)

@@ -393,6 +393,38 @@ def test_tcp_jacobian_matches_finite_differences_of_the_tcp_pose():
             np.testing.assert_allclose(jacobian[3:, joint], [turn[2, 1], turn[0, 2], turn[1, 0]], atol=1e-5)
 
 
+
+def test_inverse_kinematics_returns_joints_whose_tcp_pose_is_the_target():
+    from fr5_rl.kinematics import ForwardKinematics, InverseKinematics
+
+    kinematics = ForwardKinematics(SPEC)
+    inverse = InverseKinematics(kinematics)
+    rng = np.random.default_rng(11)
+    for goal in rng.uniform(SPEC.lower_limits / 2, SPEC.upper_limits / 2, (20, 6)):
+        position, rotation = kinematics.tcp_pose(goal)
+        start = goal + rng.uniform(-0.05, 0.05, 6)  # a few centimetres away, as the expert asks
+        joints, converged = inverse.solve(start.tolist(), position, rotation.ravel())
+        assert converged
+        reached_position, reached_rotation = kinematics.tcp_pose(np.array(joints))
+        np.testing.assert_allclose(reached_position, position, atol=1e-6)
+        np.testing.assert_allclose(reached_rotation, rotation, atol=1e-6)
+        # Six joints, six constraints: the pose's solution nearest the start is the goal itself
+        # (the other branches lie radians away; near a singular wrist, 1e-7 of pose is 1e-4 rad).
+        np.testing.assert_allclose(joints, goal, atol=1e-3)
+
+
+def test_inverse_kinematics_says_when_it_has_not_converged():
+    from fr5_rl.kinematics import ForwardKinematics, InverseKinematics
+
+    kinematics = ForwardKinematics(SPEC)
+    goal = np.array(SPEC.home_joint_positions) + 0.4
+    position, rotation = kinematics.tcp_pose(goal)
+    start = list(SPEC.home_joint_positions)
+    joints, converged = InverseKinematics(kinematics).solve(start, position, rotation.ravel(), max_iterations=1)
+    assert not converged and joints != start  # one step taken toward it, and reported as such
+    joints, converged = InverseKinematics(kinematics).solve(start, position, rotation.ravel())
+    assert converged
+
 def test_the_hint_comes_last_and_the_rest_is_unchanged():
     from fr5_rl.observation import observation_size
 

@@ -51,15 +51,7 @@ import numpy as np
 
 from .config import RobotSpec
 from .env_config import JointStepHintConfig, ObservationConfig
-from .kinematics import ForwardKinematics
-
-try:
-    # np.linalg.solve's own kernel, without its per-call checks and conversions (3.4 of its
-    # 4.9 us for a 6x6 system, every step): the same LAPACK call, the same bits. The matrix it
-    # gets here is symmetric positive definite (damping > 0), so those checks have nothing to catch.
-    from numpy.linalg._umath_linalg import solve1 as _solve
-except ImportError:  # a numpy that moved it: the public call, a little slower
-    _solve = np.linalg.solve
+from .kinematics import ForwardKinematics, solve_linear as _solve
 
 REACH_OBSERVATION_SIZE = 23  # without previous actions
 GRASP_OBSERVATION_SIZE = 24

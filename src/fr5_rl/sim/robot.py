@@ -91,12 +91,6 @@ class FR5Robot:
             p.changeDynamics(self.body, index, maxJointVelocity=robot.finger_velocity, physicsClientId=client)
         for index, velocity in zip(self.arm_joints, robot.velocity_limits):
             p.changeDynamics(self.body, index, maxJointVelocity=float(velocity), physicsClientId=client)
-        # Null-space inverse kinematics over all eight joints: the joint limits, their ranges
-        # and the home pose as the rest pose (the finger entries of the solution are ignored).
-        self._ik_lower = robot.lower_limits.tolist() + [0.0, 0.0]
-        self._ik_upper = robot.upper_limits.tolist() + [robot.finger_travel] * 2
-        self._ik_ranges = [upper - lower for upper, lower in zip(self._ik_upper, self._ik_lower)]
-        self._ik_rest = robot.home_joint_positions.tolist() + [0.0, 0.0]
 
     def stand_on(self, body: int) -> None:
         """Mount the robot on ``body`` (the table): its base and first link never count as
@@ -181,27 +175,6 @@ class FR5Robot:
         state = p.getLinkState(self.body, self.tcp_link, computeForwardKinematics=1, physicsClientId=self.client)
         rotation = np.array(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)
         return np.array(state[4]), rotation
-
-    def inverse_kinematics(self, tcp_position: Sequence[float], tcp_quaternion: Sequence[float],
-                           max_iterations: int = 60, residual_threshold: float = 1e-5) -> np.ndarray:
-        """Arm joint angles that put the tcp at a pose (PyBullet's damped least squares).
-
-        The search starts from the current joint state and is pulled toward the home pose
-        within the joint limits (null-space IK); the result is not clamped or checked.
-
-        :param tcp_position: wanted tcp position (m) in base_link.
-        :param tcp_quaternion: wanted tcp orientation (x, y, z, w) in base_link.
-        :param max_iterations: most solver iterations.
-        :param residual_threshold: the solver stops once the position error (m) is below this.
-        :return: (6,) joint angles (rad), controller order.
-        """
-        solution = p.calculateInverseKinematics(
-            self.body, self.tcp_link, [float(v) for v in tcp_position], [float(v) for v in tcp_quaternion],
-            lowerLimits=self._ik_lower, upperLimits=self._ik_upper, jointRanges=self._ik_ranges,
-            restPoses=self._ik_rest, maxNumIterations=max_iterations, residualThreshold=residual_threshold,
-            physicsClientId=self.client,
-        )
-        return np.asarray(solution[:self._n_arm])
 
     def contacts(self) -> list:
         """All contact points (PyBullet tuples) of the robot found by the last physics step."""
