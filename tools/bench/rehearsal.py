@@ -127,8 +127,9 @@ def main(argv: Optional[List[str]] = None) -> int:
                          "seed": args.seed, "backend": args.backend, **CHAINS[chain]}
             if arguments.get("driver") == "fairino":
                 # The emulated controller's port follows the master's: a second rehearsal on the
-                # machine (another bench, a rostest) must not drive this one's gripper.
-                arguments["controller_port"] = args.port + 36000
+                # machine (another bench, a rostest) must not drive this one's gripper. Below 32768:
+                # Linux lends 32768-60999 to outgoing connections, and a node's may hold the port.
+                arguments["controller_port"] = args.port + 8700
             samples: Dict[str, List[Tuple[float, ...]]] = {}
             run = run_launch(arguments, port=args.port, episodes=args.episodes, listen=timing_listener(samples),
                              node_name="bench_rehearsal")

@@ -47,7 +47,7 @@ def record_rehearsal(hidden: Path, bag: Path, episodes: int, seed: int, port: in
 
     try:
         run = run_launch({"rviz": False, "driver": "fairino", "driver_profile": hidden, "model": "models/reach",
-                          "task": "reach", "episodes": episodes, "seed": seed, "controller_port": port + 36000},
+                          "task": "reach", "episodes": episodes, "seed": seed, "controller_port": port + 8700},
                          port=port, episodes=episodes,
                          listen=start_recorder)
     finally:

@@ -7,10 +7,10 @@ reaches the target, on this machine, for the shipped configuration, over several
     python tools/bench/time_to_solve.py --task grasp-from-reward # PPO + curriculum, config/ppo_grasp.yaml, target 95 %
 
 Runs the real training command (``scripts/train.py`` or ``scripts/imitate.py``, as a
-subprocess, one seed after the other) in a temporary run directory (reach stops at success),
+subprocess, one seed after the other) in a temporary run directory (train.py's runs stop at success),
 then writes bench/results/time_to_solve_<task>.json (every seed's evaluation history, the median
 and the worst, and how busy the machine's cores were while each run ran) and a learning-curve plot beside it, and updates summary.json.
-Targets: reach median <= 60 s, grasp <= 2 h.
+Targets: reach median <= 60 s, grasp (DAgger, 90 %) <= 2 h, grasp from reward (95 %) <= 1 h.
 
 Against the previous release (issue #30; ``--no-reference`` skips it): the same command, the
 same seeds, run under that release's code (tools/bench/reference.py; the commit in
