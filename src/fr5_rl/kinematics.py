@@ -102,20 +102,8 @@ class ForwardKinematics:
             rad/s of each joint). Every FR5 joint turns about its own frame's z axis, so column
             ``i`` is ``(axis_i x (tcp - origin_i), axis_i)``.
         """
-        joints: list = []
-        px, py, pz, _, _, r02, _, _, r12, _, _, r22 = self._chain(joint_positions, joints)
-        offset = self._tcp_offset
-        tx, ty, tz = px + r02 * offset, py + r12 * offset, pz + r22 * offset
-        linear_x, linear_y, linear_z, angular_x, angular_y, angular_z = [], [], [], [], [], []
-        for ox, oy, oz, ax, ay, az in joints:
-            dx, dy, dz = tx - ox, ty - oy, tz - oz
-            linear_x.append(ay * dz - az * dy)
-            linear_y.append(az * dx - ax * dz)
-            linear_z.append(ax * dy - ay * dx)
-            angular_x.append(ax)
-            angular_y.append(ay)
-            angular_z.append(az)
-        return [tx, ty, tz], [r02, r12, r22], [linear_x, linear_y, linear_z, angular_x, angular_y, angular_z]
+        position, rotation, jacobian = self.tcp_pose_and_jacobian(joint_positions)
+        return position, [rotation[2], rotation[5], rotation[8]], jacobian
 
     def tcp_pose_and_jacobian(self, joint_positions: Sequence[float]) -> Tuple[List[float], List[float], List[List[float]]]:
         """:meth:`tcp_jacobian` with the whole tcp rotation instead of its approach axis.
@@ -129,12 +117,16 @@ class ForwardKinematics:
         offset = self._tcp_offset
         r02, r12, r22 = rotation[2], rotation[5], rotation[8]
         tx, ty, tz = px + r02 * offset, py + r12 * offset, pz + r22 * offset
-        rows: List[List[float]] = [[], [], [], [], [], []]
+        linear_x, linear_y, linear_z, angular_x, angular_y, angular_z = [], [], [], [], [], []
         for ox, oy, oz, ax, ay, az in joints:
             dx, dy, dz = tx - ox, ty - oy, tz - oz
-            for row, value in zip(rows, (ay * dz - az * dy, az * dx - ax * dz, ax * dy - ay * dx, ax, ay, az)):
-                row.append(value)
-        return [tx, ty, tz], rotation, rows
+            linear_x.append(ay * dz - az * dy)
+            linear_y.append(az * dx - ax * dz)
+            linear_z.append(ax * dy - ay * dx)
+            angular_x.append(ax)
+            angular_y.append(ay)
+            angular_z.append(az)
+        return [tx, ty, tz], rotation, [linear_x, linear_y, linear_z, angular_x, angular_y, angular_z]
 
     def joint_origins(self, joint_positions: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """Origins of the joint frames j1 … j6 (rows, m, base_link; j6's is the flange) and the

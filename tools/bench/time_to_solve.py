@@ -35,6 +35,8 @@ from reference import ReferenceUnavailable, alternating, reference_environment, 
 # task -> (seconds allowed, evaluation success that counts as solved)
 TARGETS = {"reach": (60, 0.95), "grasp": (2 * 3600, 0.90), "grasp-from-reward": (3600, 0.95)}
 DEFAULT_SEEDS = {"reach": [1, 2, 3], "grasp": [1], "grasp-from-reward": [1]}
+# The bench's tasks that train.py trains, and its --task for each.
+TRAIN_TASKS = {"reach": "reach", "grasp-from-reward": "grasp"}
 # How often reach is evaluated, not how it trains: every 10 k steps, once half of the training
 # episodes since the last evaluation succeeded (the deterministic evaluation stands at 0 % long
 # before that, and 40 episodes of an untrained policy cost 4.3 s, about 6,000 training steps).
@@ -141,9 +143,9 @@ def run_seed(task: str, seed: int, target_rate: float, hyperparams: Optional[Pat
     run_dir = Path(tempfile.mkdtemp(prefix=f"fr5_bench_{task}_{seed}_"))
     root = tree or REPO
     environment = None if tree is None else reference_environment(tree)
-    trained = task in ("reach", "grasp-from-reward")  # train.py; grasp is DAgger's imitate.py
+    trained = task in TRAIN_TASKS  # train.py; grasp is DAgger's imitate.py
     if trained:
-        command = [sys.executable, str(root / "scripts" / "train.py"), "--task", task.split("-")[0],
+        command = [sys.executable, str(root / "scripts" / "train.py"), "--task", TRAIN_TASKS[task],
                    "--run-dir", str(run_dir), "--seed", str(seed), "--stop-at-success",
                    "--target-success", str(target_rate), "--no-progress",
                    *(REACH_EVALUATION if task == "reach" else GRASP_FROM_REWARD_EVALUATION)]
