@@ -403,6 +403,7 @@ class FR5Env(gym.Env):
         from .sim.held_object import HeldObject
 
         self.release_object()
+        self.world.wake_object()
         self._held = HeldObject(self.world.client, self.robot.body, self.robot.tcp_link, self.world.object_id,
                                 [self.world.table_id])
         self._held.hold(object_in_tcp)

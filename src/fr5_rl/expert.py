@@ -6,7 +6,8 @@ tests (a task that the expert cannot solve is a broken task), and for demonstrat
 """
 from __future__ import annotations
 
-from typing import Optional
+import math
+from typing import List, Optional, Sequence
 
 import numpy as np
 
@@ -50,46 +51,54 @@ class ScriptedExpert:
 
     def act(self, observation: Optional[np.ndarray] = None) -> np.ndarray:
         """Next action in [-1, 1]^7 (the observation is unused: the expert reads the simulator)."""
+        # Plain floats throughout (numpy's per-call cost on three-element vectors was half of each
+        # call, and the reverse curriculum calls this for every step of every start it replays);
+        # the arithmetic is numpy's, term by term, so the actions are the same to the bit.
         env = self.env
         state = env.task_state()
-        q, tcp, obj = (np.asarray(v) for v in (state.joint_positions, state.tcp_position, state.object_position))
+        q = state.joint_positions
+        tcp_x, tcp_y, tcp_z = state.tcp_position
+        object_x, object_y, object_z = state.object_position
         grasp = env.task.name == "grasp"
-        grasp_point = obj + np.array([0.0, 0.0, self.grasp_height_offset if grasp else 0.0])
-        horizontal_error = float(np.linalg.norm((grasp_point - tcp)[:2]))
+        grasp_z = object_z + (self.grasp_height_offset if grasp else 0.0)
+        dx, dy, dz = object_x - tcp_x, object_y - tcp_y, grasp_z - tcp_z  # to the grasp point
+        horizontal_error = math.sqrt(dx * dx + dy * dy)
         held = grasp and state.fingers_object_contact == 2 and \
             env.gripper_command_width < env.robot_spec.max_opening_width / 2.0
         if held:
-            self.phase, target = "lift", obj + np.array([0.0, 0.0, self.lift_clearance])
-            target[2] = state.object_start_position[2] + self.grasp_height_offset + self.lift_clearance
-        elif grasp and np.linalg.norm(grasp_point - tcp) < self.at_grasp_tolerance:
-            self.phase, target = "close", grasp_point
-        elif horizontal_error < self.align_tolerance + 0.5 * max(tcp[2] - grasp_point[2], 0.0):
+            phase = "lift"
+            target = (object_x, object_y, state.object_start_position[2] + self.grasp_height_offset + self.lift_clearance)
+        elif grasp and math.sqrt(dx * dx + dy * dy + dz * dz) < self.at_grasp_tolerance:
+            phase, target = "close", (object_x, object_y, grasp_z)
+        elif horizontal_error < self.align_tolerance + 0.5 * max(tcp_z - grasp_z, 0.0):
             # A funnel: the higher above the grasp point, the more lateral error is fine, since
             # the straight line down removes it on the way.
-            self.phase, target = "descend", grasp_point
+            phase, target = "descend", (object_x, object_y, grasp_z)
         else:
-            self.phase, target = "hover", obj + np.array([0.0, 0.0, self.hover_height])
+            phase, target = "hover", (object_x, object_y, object_z + self.hover_height)
+        self.phase = phase
         # Straight-line Cartesian motion: IK for a point a short step along the line, slowing
         # down over the last centimetres.
-        offset = target - tcp
-        distance = float(np.linalg.norm(offset))
-        speed = self.phase_speed[self.phase]
-        if self.phase == "descend" and tcp[2] - grasp_point[2] > 0.06:
+        offset_x, offset_y, offset_z = target[0] - tcp_x, target[1] - tcp_y, target[2] - tcp_z
+        distance = math.sqrt(offset_x * offset_x + offset_y * offset_y + offset_z * offset_z)
+        speed = self.phase_speed[phase]
+        if phase == "descend" and tcp_z - grasp_z > 0.06:
             speed = self.phase_speed["hover"]  # slow only for the last centimetres
         step = min(speed, 0.35 * distance)
         if distance > step:
-            target = tcp + offset * (step / distance)
-        q_target = self._inverse_kinematics(target, q)
-        delta = (q_target - q) / self._max_step
+            fraction = step / distance
+            target = (tcp_x + offset_x * fraction, tcp_y + offset_y * fraction, tcp_z + offset_z * fraction)
+        joint_targets = self._inverse_kinematics(target, q)
+        max_step = self._max_step
+        delta = [(wanted - angle) / max_step for wanted, angle in zip(joint_targets, q)]
         # Scale the whole joint step (not per joint) so the motion keeps its direction.
-        action = np.zeros(7)
-        action[:6] = delta / max(1.0, float(np.max(np.abs(delta))))
-        action[6] = -1.0 if self.phase in ("close", "lift") else 1.0
-        return action.astype(np.float32)
+        scale = max(1.0, max(abs(value) for value in delta))
+        gripper = -1.0 if phase in ("close", "lift") else 1.0
+        return np.array([value / scale for value in delta] + [gripper], dtype=np.float32)
 
-    def _inverse_kinematics(self, tcp_target: np.ndarray, start: np.ndarray) -> np.ndarray:
+    def _inverse_kinematics(self, tcp_target: Sequence[float], start: Sequence[float]) -> List[float]:
         """Joint angles (rad) that put the tcp at ``tcp_target`` (m, base_link), pointing down,
         found from ``start`` (the measured joints, rad); the last iterate if not converged (the
         action then scales it to one step all the same)."""
         joints, _ = self._inverse.solve(start, tcp_target, self._down_rotation)
-        return np.asarray(joints)
+        return joints

@@ -17,7 +17,8 @@ warm-up steps are not), median of the repeats:
   randomised timing and physics steps included) and replayed:
   - *bare world*: on the env's own world (robot, table, object), one
     ``setJointMotorControlArray`` per command and its ``stepSimulation`` calls, a bare reset per
-    episode, nothing else; the replay ends with the joints the env ended with (the deviation
+    episode (the object asleep from its first physics step on, as the env's world puts it),
+    nothing else; the replay ends with the joints the env ended with (the deviation
     is reported);
   - *bare URDF only*: the same commands on the robot's URDF alone (no table, no object): the
     reference of issue #30. The object costs physics time the env cannot avoid without
@@ -169,6 +170,7 @@ def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False)
     body, joints, tcp = robot.body, robot.all_joints, robot.tcp_link
     motor, step_simulation, perf = p.setJointMotorControlArray, p.stepSimulation, time.perf_counter
     reset_joints, reset_base = p.resetJointStatesMultiDof, p.resetBasePositionAndOrientation
+    change_dynamics = p.changeDynamics
     gains = dict(forces=robot._forces, positionGains=robot._position_gains, velocityGains=robot._velocity_gains,
                  physicsClientId=client)
     get_joints, get_link, get_pose, get_contacts = (
@@ -181,10 +183,14 @@ def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False)
         t0 = perf()
         reset_joints(body, joints, start, targetVelocities=zeros, physicsClientId=client)
         reset_base(obj, position, orientation, physicsClientId=client)
+        settling = True  # the object sleeps from the end of its first physics step, as in the env
         for targets, physics_steps in commands:
             motor(body, joints, p.POSITION_CONTROL, targetPositions=targets, **gains)
             for _ in range(physics_steps):
                 step_simulation(physicsClientId=client)
+                if settling:
+                    change_dynamics(obj, -1, activationState=p.ACTIVATION_STATE_SLEEP, physicsClientId=client)
+                    settling = False
             if with_queries and physics_steps:
                 get_joints(body, joints, physicsClientId=client)
                 get_link(body, tcp, computeForwardKinematics=1, physicsClientId=client)

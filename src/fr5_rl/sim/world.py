@@ -47,6 +47,7 @@ class PyBulletWorld:
         self.object_id: Optional[int] = None
         self._object_shape: Optional[Tuple] = None
         self._object_shapes: Tuple[int, int] = (-1, -1)
+        self._object_settling = False  # placed, and not yet through its first physics step
 
     # ------------------------------------------------------------------ scene
     def add_table(self, table_cfg: TableConfig) -> int:
@@ -109,19 +110,36 @@ class PyBulletWorld:
         return p.createMultiBody(1.0, *self._object_shapes, [0, 0, 1], physicsClientId=self.client)
 
     def place_object(self, position: Sequence[float], yaw: float = 0.0) -> None:
-        """Teleport the object to ``position`` (m, base_link) at rest, upright, with ``yaw`` (rad)."""
+        """Teleport the object to ``position`` (m, base_link) at rest, upright, with ``yaw`` (rad).
+
+        The object then rests asleep until something touches it: PyBullet (3.2.7) integrates
+        gravity in the first physics step after a teleport whatever it is asked, so the request
+        to sleep that holds is made right after that step (:meth:`step`, :meth:`step_physics`).
+        Awake on the table, the object wobbled by up to ~0.2 mm over an episode and cost a
+        quarter to a third of every physics step (docs/benchmarks.md); asleep it costs
+        next to nothing, and the first touch of a finger wakes it as before.
+        """
         orientation = p.getQuaternionFromEuler([0.0, 0.0, yaw])
         p.resetBasePositionAndOrientation(self.object_id, position, orientation, physicsClientId=self.client)
         p.resetBaseVelocity(self.object_id, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
-        # A sleep request that PyBullet (3.2.7) does not keep: the one-link multibody moves on
-        # the first physics step, and resting on the table it costs about a third of every
-        # physics step (docs/benchmarks.md). The calls still change each episode's physics a
-        # little (seeded rollouts differ without them), and every figure of the shipped models
-        # was measured with them, so they stay.
+        # The first step settles the object as it always did: these two calls (a sleep request
+        # that does not yet hold) are part of how every episode starts.
         p.changeDynamics(self.object_id, -1, activationState=p.ACTIVATION_STATE_ENABLE_SLEEPING,
                          physicsClientId=self.client)
         p.changeDynamics(self.object_id, -1, activationState=p.ACTIVATION_STATE_SLEEP,
                          physicsClientId=self.client)
+        self._object_settling = True
+
+    def wake_object(self) -> None:
+        """Wake the object and cancel its pending sleep: something other than a touch is about to
+        move it (a hand-over into the gripper)."""
+        p.changeDynamics(self.object_id, -1, activationState=p.ACTIVATION_STATE_WAKE_UP, physicsClientId=self.client)
+        self._object_settling = False
+
+    def _sleep_settled_object(self) -> None:
+        # After the first physics step since the placement: the request that holds.
+        p.changeDynamics(self.object_id, -1, activationState=p.ACTIVATION_STATE_SLEEP, physicsClientId=self.client)
+        self._object_settling = False
 
     def object_pose(self) -> Tuple[Tuple[float, float, float], Tuple[float, float, float, float]]:
         """Object centre position (m) and quaternion (x, y, z, w) in base_link."""
@@ -136,12 +154,20 @@ class PyBulletWorld:
 
     def step(self) -> None:
         """Advance one control period (``substeps`` physics steps)."""
-        for _ in range(self.substeps):
-            p.stepSimulation(physicsClientId=self.client)
+        client, step_simulation = self.client, p.stepSimulation
+        substeps = self.substeps
+        if self._object_settling:
+            step_simulation(physicsClientId=client)
+            self._sleep_settled_object()
+            substeps -= 1
+        for _ in range(substeps):
+            step_simulation(physicsClientId=client)
 
     def step_physics(self) -> None:
         """Advance one physics step (``physics_dt`` seconds)."""
         p.stepSimulation(physicsClientId=self.client)
+        if self._object_settling:
+            self._sleep_settled_object()
 
     def _unload_renderer(self) -> None:
         # The TinyRenderer is linked into PyBullet as a plugin; loading it by name returns the
