@@ -167,3 +167,77 @@ def test_the_curriculum_moves_starts_back_and_resumes(tmp_path):
         assert venv.get_attr("reach_back") == [0.75, 0.75] and venv.get_attr("frontier_end") == [35, 35]
     finally:
         venv.close()
+
+
+# ----------------------------------------------------------------------------- one replay, several starts
+def test_a_saved_episode_goes_on_exactly_as_it_did():
+    """FR5Env.save_state / restore_state: in a plain configuration a restored episode takes the
+    same steps to the bit (observations, rewards, verdicts), restored twice over."""
+    from fr5_rl.expert import ScriptedExpert
+
+    env = FR5Env("grasp")
+    expert = ScriptedExpert(env)
+    try:
+        observation, _ = env.reset(seed=7)
+        for _ in range(45):  # the fingers about to close round the cup
+            observation, *_ = env.step(expert.act(observation))
+        saved = env.save_state()
+
+        def go_on():
+            taken, current = [], observation
+            for _ in range(40):
+                current, reward, terminated, truncated, info = env.step(expert.act(current))
+                taken.append((current.tobytes(), reward, terminated, truncated, info["is_success"], env._steps))
+                if terminated or truncated:
+                    break
+            return taken
+
+        first = go_on()
+        assert first[-1][4]  # the expert lifted and held the cup
+        env.restore_state(saved)
+        assert go_on() == first
+        env.restore_state(saved)
+        assert go_on() == first
+        env.discard_state(saved)
+    finally:
+        env.close()
+
+
+def test_one_replay_serves_several_starts():
+    """episodes_per_replay=2: two starts drawn at once; the second reset plays the one saved on
+    the way, at its own prefix, with the observation it had there, without replaying anything."""
+    env = ExpertStartWrapper(FR5Env("grasp"), max_steps=70, reach_back=1.0, episodes_per_replay=2)
+    steps = {"count": 0}
+    inner = env.unwrapped
+    original_step = inner.step
+
+    def counted(action):
+        steps["count"] += 1
+        return original_step(action)
+
+    inner.step = counted
+    try:
+        env.reset(seed=31)
+        env.reset()  # the start saved by the seeded reset's replay
+        for _ in range(6):
+            steps["count"] = 0
+            first, info_first = env.reset()
+            replayed = steps["count"]
+            assert replayed == info_first["expert_steps"]  # one replay to the furthest start
+            placement = inner._object_start
+            env.step(np.zeros(7, dtype=np.float32))  # the first episode moves on
+            steps["count"] = 0
+            second, info_second = env.reset()
+            assert steps["count"] == 0  # nothing replayed: the saved start is played
+            assert info_second["expert_steps"] <= info_first["expert_steps"]
+            assert inner._steps == info_second["expert_steps"]
+            assert inner._object_start == placement  # the same replay's placement
+            np.testing.assert_allclose(second, inner._observe()[1], atol=1e-6)
+        # A new level discards what was drawn under the one before.
+        env.reset()
+        env.set_reach_back(None)
+        _, info = env.reset()
+        assert info["expert_steps"] == 0
+    finally:
+        del inner.step
+        env.close()

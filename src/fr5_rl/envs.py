@@ -12,6 +12,7 @@ ROS simulator node) needs, without reaching into the simulator: :meth:`FR5Env.ad
 """
 from __future__ import annotations
 
+import copy
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -129,6 +130,26 @@ class SceneDescription:
             radius, height = self.object_dims
             return (2.0 * radius, 2.0 * radius, height)
         return (2.0 * self.object_dims[0],) * 3
+
+
+@dataclass(frozen=True)
+class SavedEpisode:
+    """An episode saved by :meth:`FR5Env.save_state`: the world's simulator state, the
+    environment's per-episode attributes, the task's and command shaper's, and the robot's
+    command state."""
+
+    simulation: Tuple[int, bool]
+    environment: Dict[str, Any]
+    parts: Tuple[Dict[str, Any], Dict[str, Any]]
+    robot: Tuple[float, Optional[float]]
+
+
+# What FR5Env.save_state leaves out: built once and never changed by a step (the simulator's
+# handles, configuration, spaces), saved apart (the task, the shaper), or the random stream.
+_SHARED_STATE = frozenset({
+    "world", "robot", "cfg", "robot_spec", "task", "kinematics", "shaper", "observation_builder",
+    "observation_space", "action_space", "render_mode", "spec", "_bridge_model", "_np_random", "_np_random_seed",
+})
 
 
 class FR5Env(gym.Env):
@@ -299,6 +320,36 @@ class FR5Env(gym.Env):
 
     def close(self) -> None:
         self.world.close()
+
+    # ------------------------------------------------------------------ saved states
+    def save_state(self) -> "SavedEpisode":
+        """The episode as it stands, to go on from later with :meth:`restore_state`: the
+        simulator's state and everything of this environment's that a step changes (the command
+        shaper's filter, latency queues, the task's timers and potential, the step count, ...).
+
+        Restoring is only meaningful in the same episode's world (no :meth:`reset` in between:
+        a reset builds a new object). The random stream is not saved: after a restore the episode
+        goes on with fresh draws (in a plain configuration steps draw nothing, and a restored
+        episode goes on exactly as the saved one did). A saved state holds simulator memory until
+        :meth:`discard_state`.
+        """
+        own = {name: copy.deepcopy(value) for name, value in self.__dict__.items() if name not in _SHARED_STATE}
+        parts = (self.task.__dict__, self.shaper.__dict__)
+        return SavedEpisode(self.world.save_state(), own, tuple(copy.deepcopy(part) for part in parts),
+                            self.robot.save_command_state())
+
+    def restore_state(self, saved: "SavedEpisode") -> None:
+        """Go back to a state from :meth:`save_state` (it stays saved: restore it again or discard it)."""
+        self.world.restore_state(saved.simulation)
+        self.__dict__.update(copy.deepcopy(saved.environment))
+        task_state, shaper_state = (copy.deepcopy(part) for part in saved.parts)
+        self.task.__dict__.update(task_state)
+        self.shaper.__dict__.update(shaper_state)
+        self.robot.restore_command_state(saved.robot)
+
+    def discard_state(self, saved: "SavedEpisode") -> None:
+        """Free the simulator memory of a state from :meth:`save_state`."""
+        self.world.discard_state(saved.simulation)
 
     # ------------------------------------------------------------------ inspection
     def tcp_position(self) -> np.ndarray:

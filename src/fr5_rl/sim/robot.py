@@ -128,6 +128,17 @@ class FR5Robot:
             physicsClientId=self.client,
         )
 
+    def save_command_state(self) -> Tuple[float, Optional[float]]:
+        """What the simulator's saved state does not hold: the fingers' ramped target (m) and
+        the joint damping set (N*m*s/rad), for :meth:`restore_command_state`."""
+        return self._finger_target, self._joint_damping
+
+    def restore_command_state(self, state: Tuple[float, Optional[float]]) -> None:
+        """Back to :meth:`save_command_state`'s values (the damping is re-applied if it differs)."""
+        self._finger_target, damping = state
+        if damping is not None:
+            self.set_joint_damping(damping)
+
     def set_joint_damping(self, damping: float) -> None:
         """Viscous damping (N*m*s/rad) on every arm joint (domain randomisation)."""
         if damping == self._joint_damping:

@@ -169,6 +169,21 @@ class PyBulletWorld:
         if self._object_settling:
             self._sleep_settled_object()
 
+    def save_state(self) -> Tuple[int, bool]:
+        """The simulation as it stands (every body's pose and velocity, joint states, contacts)
+        for :meth:`restore_state`, with the same bodies still in the world. The saved state holds
+        simulator memory until :meth:`discard_state`. About 2 ms."""
+        return p.saveState(physicsClientId=self.client), self._object_settling
+
+    def restore_state(self, state: Tuple[int, bool]) -> None:
+        """Go back to a state from :meth:`save_state` (about 0.06 ms); it stays saved."""
+        state_id, self._object_settling = state
+        p.restoreState(stateId=state_id, physicsClientId=self.client)
+
+    def discard_state(self, state: Tuple[int, bool]) -> None:
+        """Free a state from :meth:`save_state`."""
+        p.removeState(state[0], physicsClientId=self.client)
+
     def _unload_renderer(self) -> None:
         # The TinyRenderer is linked into PyBullet as a plugin; loading it by name returns the
         # loaded instance's id. Should a PyBullet build lack it, nothing changes.

@@ -61,12 +61,18 @@ class ExpertStartWrapper(gym.Wrapper):
     retries = 3
 
     def __init__(self, env: gym.Env, max_steps: int, reach_back: Optional[float] = 1.0,
-                 frontier_share: float = 0.0) -> None:
+                 frontier_share: float = 0.0, episodes_per_replay: int = 1) -> None:
         super().__init__(env)
+        if episodes_per_replay < 1:
+            raise ValueError(f"episodes_per_replay must be at least 1, got {episodes_per_replay}")
         self.max_steps = int(max_steps)
         self.frontier_share = float(frontier_share)
+        self.episodes_per_replay = int(episodes_per_replay)
         self.reach_back: Optional[float] = None
         self.frontier_end = self.max_steps + 1
+        # Starts saved along the last replay, not yet played, the furthest last:
+        # (prefix, saved episode, its observation, the reset's info).
+        self._saved_starts: List[Tuple[int, Any]] = []
         self.set_reach_back(reach_back)
         self.expert = ScriptedExpert(env)
         self.prefix = 0
@@ -78,6 +84,7 @@ class ExpertStartWrapper(gym.Wrapper):
             prefix (None: the whole range is new)."""
         self.reach_back = None if reach_back is None else min(max(float(reach_back), 0.0), 1.0)
         self.frontier_end = self.max_steps + 1 if frontier_end is None else int(frontier_end)
+        self._discard_saved_starts()  # drawn under the level before
 
     def prefix_range(self) -> Tuple[int, int]:
         """The expert steps drawn from, both ends included ((0, 0): plain resets)."""
@@ -86,7 +93,12 @@ class ExpertStartWrapper(gym.Wrapper):
         return first_prefix(self.reach_back, self.max_steps), self.max_steps
 
     def reset(self, **kwargs: Any) -> Tuple[np.ndarray, Dict[str, Any]]:
+        if self._saved_starts and not kwargs:
+            return self._play_saved_start()
+        self._discard_saved_starts()
         observation, info = self.env.reset(**kwargs)
+        if self.episodes_per_replay > 1 and self.reach_back is not None:
+            return self._replay_for_several(observation, info)
         random = self.env.unwrapped.np_random
         low, high = self.prefix_range()
         if self.reach_back is not None and self.frontier_share > 0.0 and random.random() < self.frontier_share:
@@ -106,6 +118,65 @@ class ExpertStartWrapper(gym.Wrapper):
             high = taken  # the step that ended it was step taken + 1
             low = min(low, high)
         return observation, dict(info, expert_steps=self.prefix)
+
+    def _draw_prefix(self, low: int, high: int) -> int:
+        """One start, with the frontier's share, in [low, high]."""
+        random = self.env.unwrapped.np_random
+        if self.frontier_share > 0.0 and random.random() < self.frontier_share:
+            high = max(min(self.frontier_end - 1, high), low)
+        return int(random.integers(low, high + 1))
+
+    def _replay_for_several(self, observation: np.ndarray, info: Dict[str, Any]) -> Tuple[np.ndarray, Dict[str, Any]]:
+        """``episodes_per_replay`` starts drawn at once and met along one replay of the expert:
+        the furthest is played now, the others saved (:meth:`FR5Env.save_state`) and played by
+        the next resets. A replay the expert's episode ends before some starts keeps those it
+        passed; when it passed none, the environment is reset and shorter starts drawn, as with
+        one start per replay."""
+        env = self.env.unwrapped
+        low, high = self.prefix_range()
+        for _ in range(self.retries):
+            prefixes = sorted(self._draw_prefix(low, high) for _ in range(self.episodes_per_replay))
+            self.expert.reset()
+            taken, ended, passed = 0, False, []
+            for index, prefix in enumerate(prefixes):
+                while taken < prefix and not ended:
+                    observation, _, terminated, truncated, _ = self.env.step(self.expert.act(observation))
+                    taken += 1
+                    ended = terminated or truncated
+                if ended:
+                    break
+                # The last start is played from the live episode; the others are saved on the way.
+                saved = None if index == len(prefixes) - 1 else env.save_state()
+                passed.append((prefix, saved, observation, info))
+            if passed:
+                if ended:  # the furthest start passed is played from its saved state
+                    self._saved_starts = passed
+                    return self._play_saved_start()
+                prefix, _, observation, info = passed.pop()
+                self._saved_starts = passed
+                self.prefix = prefix
+                return observation, dict(info, expert_steps=prefix)
+            observation, info = self.env.reset()
+            high = taken - 1  # the step that ended it was step taken
+            low = min(low, high)
+        self.prefix = 0
+        return observation, dict(info, expert_steps=0)
+
+    def _play_saved_start(self) -> Tuple[np.ndarray, Dict[str, Any]]:
+        env = self.env.unwrapped
+        self.prefix, saved, observation, info = self._saved_starts.pop()
+        env.restore_state(saved)
+        env.discard_state(saved)
+        return observation, dict(info, expert_steps=self.prefix)
+
+    def _discard_saved_starts(self) -> None:
+        env = self.env.unwrapped
+        while self._saved_starts:
+            env.discard_state(self._saved_starts.pop()[1])
+
+    def close(self) -> None:
+        self._discard_saved_starts()
+        super().close()
 
     def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:
         observation, reward, terminated, truncated, info = self.env.step(action)

@@ -47,7 +47,8 @@ class ExpertStartSettings:
     step back (:class:`fr5_rl.training.curriculum.ExpertStartCurriculum`). The reach-back grows by
     ``step_back`` whenever the last ``window`` training episodes begun at the frontier
     succeeded at a rate of ``promote_at`` or more, up to 1, then once more to plain resets.
-    Evaluation always starts from plain resets."""
+    Evaluation always starts from plain resets. ``episodes_per_replay`` starts are drawn at once
+    and met along one replay of the expert (1: one replay per episode, each on a new placement)."""
 
     max_steps: int
     first_reach_back: float
@@ -55,9 +56,11 @@ class ExpertStartSettings:
     window: int
     step_back: float
     frontier_share: float
+    episodes_per_replay: int = 1
 
     def check(self, source: str) -> None:
-        check_positive(source, **{"expert_start.max_steps": self.max_steps, "expert_start.window": self.window})
+        check_positive(source, **{"expert_start.max_steps": self.max_steps, "expert_start.window": self.window,
+                                  "expert_start.episodes_per_replay": self.episodes_per_replay})
         for name, value in (("first_reach_back", self.first_reach_back), ("promote_at", self.promote_at),
                             ("step_back", self.step_back)):
             if not 0.0 < value <= 1.0:
