@@ -322,7 +322,7 @@ class FR5Env(gym.Env):
         self.world.close()
 
     # ------------------------------------------------------------------ saved states
-    def save_state(self) -> "SavedEpisode":
+    def save_state(self) -> SavedEpisode:
         """The episode as it stands, to go on from later with :meth:`restore_state`: the
         simulator's state and everything of this environment's that a step changes (the command
         shaper's filter, latency queues, the task's timers and potential, the step count, ...).
@@ -338,7 +338,7 @@ class FR5Env(gym.Env):
         return SavedEpisode(self.world.save_state(), own, tuple(copy.deepcopy(part) for part in parts),
                             self.robot.save_command_state())
 
-    def restore_state(self, saved: "SavedEpisode") -> None:
+    def restore_state(self, saved: SavedEpisode) -> None:
         """Go back to a state from :meth:`save_state` (it stays saved: restore it again or discard it)."""
         self.world.restore_state(saved.simulation)
         self.__dict__.update(copy.deepcopy(saved.environment))
@@ -347,7 +347,7 @@ class FR5Env(gym.Env):
         self.shaper.__dict__.update(shaper_state)
         self.robot.restore_command_state(saved.robot)
 
-    def discard_state(self, saved: "SavedEpisode") -> None:
+    def discard_state(self, saved: SavedEpisode) -> None:
         """Free the simulator memory of a state from :meth:`save_state`."""
         self.world.discard_state(saved.simulation)
 

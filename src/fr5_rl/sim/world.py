@@ -112,11 +112,11 @@ class PyBulletWorld:
     def place_object(self, position: Sequence[float], yaw: float = 0.0) -> None:
         """Teleport the object to ``position`` (m, base_link) at rest, upright, with ``yaw`` (rad).
 
-        The object then rests asleep until something touches it: PyBullet (3.2.7) integrates
-        gravity in the first physics step after a teleport whatever it is asked, so the request
-        to sleep that holds is made right after that step (:meth:`step`, :meth:`step_physics`).
-        Awake on the table, the object wobbled by up to ~0.2 mm over an episode and cost a
-        quarter to a third of every physics step (docs/benchmarks.md); asleep it costs
+        The object then rests asleep until something touches it. In the first physics step after
+        a teleport PyBullet (3.2.7) lets it drop onto the table, which wakes it however it was
+        asked to sleep, so the request that holds is made right after that step (:meth:`step`,
+        :meth:`step_physics`). Awake on the table, the object wobbled by up to ~0.2 mm over an
+        episode and cost a quarter of every physics step (docs/benchmarks.md); asleep it costs
         next to nothing, and the first touch of a finger wakes it as before.
         """
         orientation = p.getQuaternionFromEuler([0.0, 0.0, yaw])

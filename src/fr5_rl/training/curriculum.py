@@ -56,6 +56,8 @@ class ExpertStartWrapper(gym.Wrapper):
         has the object lifted and is holding it.
     :param reach_back: see above; set by the curriculum with :meth:`set_reach_back`.
     :param frontier_share: share of the resets drawn from the frontier, in [0, 1].
+    :param episodes_per_replay: starts drawn at once and met along one replay (1: one replay per
+        episode); see :meth:`_replay_for_several`.
     """
 
     retries = 3
@@ -72,7 +74,7 @@ class ExpertStartWrapper(gym.Wrapper):
         self.frontier_end = self.max_steps + 1
         # Starts saved along the last replay, not yet played, the furthest last:
         # (prefix, saved episode, its observation, the reset's info).
-        self._saved_starts: List[Tuple[int, Any]] = []
+        self._saved_starts: List[Tuple[int, Any, np.ndarray, Dict[str, Any]]] = []
         self.set_reach_back(reach_back)
         self.expert = ScriptedExpert(env)
         self.prefix = 0
