@@ -57,7 +57,7 @@ class ExpertStartWrapper(gym.Wrapper):
     :param reach_back: see above; set by the curriculum with :meth:`set_reach_back`.
     :param frontier_share: share of the resets drawn from the frontier, in [0, 1].
     :param episodes_per_replay: starts drawn at once and met along one replay (1: one replay per
-        episode); see :meth:`_replay_for_several`.
+        episode); see :meth:`_replay`.
     """
 
     retries = 3
@@ -99,70 +99,53 @@ class ExpertStartWrapper(gym.Wrapper):
             return self._play_saved_start()
         self._discard_saved_starts()
         observation, info = self.env.reset(**kwargs)
-        if self.episodes_per_replay > 1 and self.reach_back is not None:
-            return self._replay_for_several(observation, info)
         random = self.env.unwrapped.np_random
         low, high = self.prefix_range()
-        if self.reach_back is not None and self.frontier_share > 0.0 and random.random() < self.frontier_share:
-            high = max(min(self.frontier_end - 1, high), low)
+        count = self.episodes_per_replay if self.reach_back is not None else 1
+        # Each start's range, the frontier's share drawn once per start (retries keep it).
+        highs = [max(min(self.frontier_end - 1, high), low)
+                 if self.reach_back is not None and self.frontier_share > 0.0 and random.random() < self.frontier_share
+                 else high for _ in range(count)]
         self.prefix = 0
         for _ in range(self.retries):
-            prefix = int(random.integers(low, high + 1))
-            self.expert.reset()
-            for taken in range(prefix):  # noqa: B007 (read after the loop: where the episode ended)
-                observation, _, terminated, truncated, _ = self.env.step(self.expert.act(observation))
-                if terminated or truncated:
-                    break
-            else:
-                self.prefix = prefix
-                break
+            observation, info, taken = self._replay(observation, info, sorted(
+                int(random.integers(low, start_high + 1)) for start_high in highs))
+            if taken is None:
+                return observation, info
             observation, info = self.env.reset()
-            high = taken  # the step that ended it was step taken + 1
-            low = min(low, high)
-        return observation, dict(info, expert_steps=self.prefix)
-
-    def _draw_prefix(self, low: int, high: int) -> int:
-        """One start, with the frontier's share, in [low, high]."""
-        random = self.env.unwrapped.np_random
-        if self.frontier_share > 0.0 and random.random() < self.frontier_share:
-            high = max(min(self.frontier_end - 1, high), low)
-        return int(random.integers(low, high + 1))
-
-    def _replay_for_several(self, observation: np.ndarray, info: Dict[str, Any]) -> Tuple[np.ndarray, Dict[str, Any]]:
-        """``episodes_per_replay`` starts drawn at once and met along one replay of the expert:
-        the furthest is played now, the others saved (:meth:`FR5Env.save_state`) and played by
-        the next resets. A replay the expert's episode ends before some starts keeps those it
-        passed; when it passed none, the environment is reset and shorter starts drawn, as with
-        one start per replay."""
-        env = self.env.unwrapped
-        low, high = self.prefix_range()
-        for _ in range(self.retries):
-            prefixes = sorted(self._draw_prefix(low, high) for _ in range(self.episodes_per_replay))
-            self.expert.reset()
-            taken, ended, passed = 0, False, []
-            for index, prefix in enumerate(prefixes):
-                while taken < prefix and not ended:
-                    observation, _, terminated, truncated, _ = self.env.step(self.expert.act(observation))
-                    taken += 1
-                    ended = terminated or truncated
-                if ended:
-                    break
-                # The last start is played from the live episode; the others are saved on the way.
-                saved = None if index == len(prefixes) - 1 else env.save_state()
-                passed.append((prefix, saved, observation, info))
-            if passed:
-                if ended:  # the furthest start passed is played from its saved state
-                    self._saved_starts = passed
-                    return self._play_saved_start()
-                prefix, _, observation, info = passed.pop()
-                self._saved_starts = passed
-                self.prefix = prefix
-                return observation, dict(info, expert_steps=prefix)
-            observation, info = self.env.reset()
-            high = taken - 1  # the step that ended it was step taken
-            low = min(low, high)
-        self.prefix = 0
+            # The step that ended the replay was step `taken`: shorter starts only.
+            highs = [min(start_high, taken - 1) for start_high in highs]
+            low = min(low, taken - 1)
         return observation, dict(info, expert_steps=0)
+
+    def _replay(self, observation: np.ndarray, info: Dict[str, Any], prefixes: List[int]
+                ) -> Tuple[np.ndarray, Dict[str, Any], Optional[int]]:
+        """Run the expert from the reset through the starts ``prefixes`` (ascending): the
+        furthest is played now, the others are saved on the way (:meth:`FR5Env.save_state`) for
+        the next resets. A replay the expert's episode ends before some starts keeps those it
+        passed. Returns the start's observation and info and None, or, when the episode ended
+        before the first start, the last observation, the reset's info and the steps taken."""
+        env = self.env.unwrapped
+        self.expert.reset()
+        taken, ended, passed = 0, False, []
+        for index, prefix in enumerate(prefixes):
+            while taken < prefix and not ended:
+                observation, _, terminated, truncated, _ = self.env.step(self.expert.act(observation))
+                taken += 1
+                ended = terminated or truncated
+            if ended:
+                break
+            # The last start is played from the live episode; the others are saved on the way.
+            saved = None if index == len(prefixes) - 1 else env.save_state()
+            passed.append((prefix, saved, observation, info))
+        if not passed:
+            return observation, info, taken
+        if ended:  # the furthest start passed is played from its saved state
+            self._saved_starts = passed
+            return (*self._play_saved_start(), None)
+        self.prefix, _, observation, info = passed.pop()
+        self._saved_starts = passed
+        return observation, dict(info, expert_steps=self.prefix), None
 
     def _play_saved_start(self) -> Tuple[np.ndarray, Dict[str, Any]]:
         env = self.env.unwrapped
