@@ -56,7 +56,7 @@ bench-ray: setup
 
 bench-grasp: setup
 	@$(ENV) python tools/bench/time_to_solve.py --task grasp
-	@$(ENV) python tools/bench/time_to_solve.py --task grasp-from-reward
+	@$(ENV) python tools/bench/time_to_solve.py --task grasp-from-reward --max-timesteps 1200000
 	@$(ENV) python tools/bench/ros_loop.py --model models/grasp --episodes 20
 	@$(ENV) python tools/bench/env_and_inference.py --skip-env --model models/grasp --results bench/results/grasp
 
