@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 from collections import deque
 from pathlib import Path
-from typing import Any, Deque, Dict, List, Optional, Tuple
+from typing import Any, Deque, Dict, Generator, List, Optional, Tuple
 
 import gymnasium as gym
 import numpy as np
@@ -32,6 +32,20 @@ PLAIN_LEVEL = 1.1
 def first_prefix(reach_back: float, max_steps: int) -> int:
     """The shortest expert prefix drawn at ``reach_back`` (the start furthest back)."""
     return int(round((1.0 - reach_back) * max_steps))
+
+
+def spare_seed(seed: int) -> int:
+    """The seed of a spare environment whose live one was seeded ``seed``: a stream of its own."""
+    return int(np.random.SeedSequence((int(seed), 0x5BA2E)).generate_state(1)[0])
+
+
+def _run_to_end(generator: Generator[None, None, Any]) -> Any:
+    """Run a generator through; its return value."""
+    while True:
+        try:
+            next(generator)
+        except StopIteration as finished:
+            return finished.value
 
 
 class ExpertStartWrapper(gym.Wrapper):
@@ -58,15 +72,30 @@ class ExpertStartWrapper(gym.Wrapper):
     :param frontier_share: share of the resets drawn from the frontier, in [0, 1].
     :param episodes_per_replay: starts drawn at once and met along one replay (1: one replay per
         episode); see :meth:`_replay`.
+    :param spare: a second environment built as ``env`` was, or None. With one, the next
+        episode's start is prepared in the spare while the live environment plays (see
+        :meth:`idle_work`), and each automatic reset swaps the two: the replay leaves the reset's
+        critical path. Not with ``episodes_per_replay`` above 1.
     """
 
     retries = 3
 
     def __init__(self, env: gym.Env, max_steps: int, reach_back: Optional[float] = 1.0,
-                 frontier_share: float = 0.0, episodes_per_replay: int = 1) -> None:
+                 frontier_share: float = 0.0, episodes_per_replay: int = 1,
+                 spare: Optional[gym.Env] = None) -> None:
         super().__init__(env)
         if episodes_per_replay < 1:
             raise ValueError(f"episodes_per_replay must be at least 1, got {episodes_per_replay}")
+        if spare is not None and episodes_per_replay > 1:
+            raise ValueError("a spare environment prepares one start at a time: use it with "
+                             "episodes_per_replay 1, or drop the spare")
+        # The spare and its expert, the generator preparing its next start (None: none begun),
+        # and that start once ready: (observation, info).
+        self._spare = spare
+        self._spare_expert = None if spare is None else ScriptedExpert(spare)
+        self._preparation: Optional[Generator[None, None, Tuple[np.ndarray, Dict[str, Any]]]] = None
+        self._prepared: Optional[Tuple[np.ndarray, Dict[str, Any]]] = None
+        self._preparation_error: Optional[BaseException] = None
         self.max_steps = int(max_steps)
         self.frontier_share = float(frontier_share)
         self.episodes_per_replay = int(episodes_per_replay)
@@ -84,9 +113,16 @@ class ExpertStartWrapper(gym.Wrapper):
             (clipped to [0, 1]), or None for plain resets.
         :param frontier_end: the frontier's first prefix not in it: the previous level's first
             prefix (None: the whole range is new)."""
+        # A start the spare is preparing was drawn under the level before. It is finished, not
+        # cut short, so the spare's random stream is the same however far it had got, then dropped.
+        preparing = self._preparation is not None or self._prepared is not None
+        if preparing:
+            self._finish_preparation()
         self.reach_back = None if reach_back is None else min(max(float(reach_back), 0.0), 1.0)
         self.frontier_end = self.max_steps + 1 if frontier_end is None else int(frontier_end)
         self._discard_saved_starts()  # drawn under the level before
+        if preparing:
+            self._begin_preparation({})
 
     def prefix_range(self) -> Tuple[int, int]:
         """The expert steps drawn from, both ends included ((0, 0): plain resets)."""
@@ -95,57 +131,119 @@ class ExpertStartWrapper(gym.Wrapper):
         return first_prefix(self.reach_back, self.max_steps), self.max_steps
 
     def reset(self, **kwargs: Any) -> Tuple[np.ndarray, Dict[str, Any]]:
-        if self._saved_starts and not kwargs:
+        if self._spare is not None:
+            observation, info = self._reset_from_spare(kwargs)
+        elif self._saved_starts and not kwargs:
             return self._play_saved_start()
-        self._discard_saved_starts()
-        observation, info = self.env.reset(**kwargs)
-        random = self.env.unwrapped.np_random
+        else:
+            self._discard_saved_starts()
+            observation, info = _run_to_end(self._start(self.env, self.expert, kwargs))
+        self.prefix = info["expert_steps"]
+        return observation, info
+
+    def _start(self, env: gym.Env, expert: ScriptedExpert, kwargs: Dict[str, Any]
+               ) -> Generator[None, None, Tuple[np.ndarray, Dict[str, Any]]]:
+        """Reset ``env`` and run ``expert`` to a drawn start, yielding after each expert step;
+        returns the start's observation and info (its ``expert_steps`` included). Everything
+        drawn comes from ``env``'s own random stream, so the start is the same however its steps
+        are spread in time."""
+        observation, info = env.reset(**kwargs)
+        random = env.unwrapped.np_random
         low, high = self.prefix_range()
         count = self.episodes_per_replay if self.reach_back is not None else 1
         # Each start's range, the frontier's share drawn once per start (retries keep it).
         highs = [max(min(self.frontier_end - 1, high), low)
                  if self.reach_back is not None and self.frontier_share > 0.0 and random.random() < self.frontier_share
                  else high for _ in range(count)]
-        self.prefix = 0
         for _ in range(self.retries):
-            observation, info, taken = self._replay(observation, info, sorted(
+            observation, info, taken = yield from self._replay(env, expert, observation, info, sorted(
                 int(random.integers(low, start_high + 1)) for start_high in highs))
             if taken is None:
                 return observation, info
-            observation, info = self.env.reset()
+            observation, info = env.reset()
             # The step that ended the replay was step `taken`: shorter starts only.
             highs = [min(start_high, taken - 1) for start_high in highs]
             low = min(low, taken - 1)
         return observation, dict(info, expert_steps=0)
 
-    def _replay(self, observation: np.ndarray, info: Dict[str, Any], prefixes: List[int]
-                ) -> Tuple[np.ndarray, Dict[str, Any], Optional[int]]:
-        """Run the expert from the reset through the starts ``prefixes`` (ascending): the
-        furthest is played now, the others are saved on the way (:meth:`FR5Env.save_state`) for
-        the next resets. A replay the expert's episode ends before some starts keeps those it
-        passed. Returns the start's observation and info and None, or, when the episode ended
-        before the first start, the last observation, the reset's info and the steps taken."""
-        env = self.env.unwrapped
-        self.expert.reset()
+    def _replay(self, env: gym.Env, expert: ScriptedExpert, observation: np.ndarray, info: Dict[str, Any],
+                prefixes: List[int]) -> Generator[None, None, Tuple[np.ndarray, Dict[str, Any], Optional[int]]]:
+        """Run the expert from the reset through the starts ``prefixes`` (ascending), yielding
+        after each step: the furthest is played now, the others are saved on the way
+        (:meth:`FR5Env.save_state`) for the next resets. A replay the expert's episode ends before
+        some starts keeps those it passed. Returns the start's observation and info and None, or,
+        when the episode ended before the first start, the last observation, the reset's info
+        and the steps taken."""
+        unwrapped = env.unwrapped
+        expert.reset()
         taken, ended, passed = 0, False, []
         for index, prefix in enumerate(prefixes):
             while taken < prefix and not ended:
-                observation, _, terminated, truncated, _ = self.env.step(self.expert.act(observation))
+                observation, _, terminated, truncated, _ = env.step(expert.act(observation))
                 taken += 1
                 ended = terminated or truncated
+                yield
             if ended:
                 break
             # The last start is played from the live episode; the others are saved on the way.
-            saved = None if index == len(prefixes) - 1 else env.save_state()
+            saved = None if index == len(prefixes) - 1 else unwrapped.save_state()
             passed.append((prefix, saved, observation, info))
         if not passed:
             return observation, info, taken
         if ended:  # the furthest start passed is played from its saved state
             self._saved_starts = passed
             return (*self._play_saved_start(), None)
-        self.prefix, _, observation, info = passed.pop()
+        prefix, _, observation, info = passed.pop()
         self._saved_starts = passed
-        return observation, dict(info, expert_steps=self.prefix), None
+        return observation, dict(info, expert_steps=prefix), None
+
+    # -- the spare: the next start prepared while this episode plays ------------------------
+    def _reset_from_spare(self, kwargs: Dict[str, Any]) -> Tuple[np.ndarray, Dict[str, Any]]:
+        """An automatic reset plays the spare's prepared start (finishing it here if idle time
+        did not) and sets the spare preparing the next. An explicit one (a seed or options)
+        starts the live environment now and the spare afresh, seeded from that seed."""
+        if kwargs or (self._preparation is None and self._prepared is None):
+            self._finish_preparation()  # its draws all made: the spare's random stream stays the same
+            observation, info = _run_to_end(self._start(self.env, self.expert, kwargs))
+            seed = kwargs.get("seed")
+            self._begin_preparation({} if seed is None else {"seed": spare_seed(seed)})
+            return observation, info
+        observation, info = self._finish_preparation()
+        self.env, self._spare = self._spare, self.env
+        self.expert, self._spare_expert = self._spare_expert, self.expert
+        self._begin_preparation({})
+        return observation, info
+
+    def _begin_preparation(self, kwargs: Dict[str, Any]) -> None:
+        self._prepared, self._preparation_error = None, None
+        self._preparation = self._start(self._spare, self._spare_expert, kwargs)
+
+    def idle_work(self) -> bool:
+        """Take one step of preparing the spare's next start (one expert step, about 0.3 ms):
+        what a vectorised env's process calls while it would otherwise wait.
+
+        :return: whether there was work to do (False: the next start is ready, or there is no
+            spare).
+        """
+        if self._preparation is None:
+            return False
+        try:
+            next(self._preparation)
+        except StopIteration as finished:
+            self._prepared, self._preparation = finished.value, None
+        except Exception as error:  # raised by the reset that needs the start, not here in idle time
+            self._preparation_error, self._preparation = error, None
+        return True
+
+    def _finish_preparation(self) -> Optional[Tuple[np.ndarray, Dict[str, Any]]]:
+        """Run what is left of the spare's preparation; its start (None: nothing was begun)."""
+        while self.idle_work():
+            pass
+        if self._preparation_error is not None:
+            error, self._preparation_error = self._preparation_error, None
+            raise error
+        prepared, self._prepared = self._prepared, None
+        return prepared
 
     def _play_saved_start(self) -> Tuple[np.ndarray, Dict[str, Any]]:
         env = self.env.unwrapped
@@ -161,6 +259,9 @@ class ExpertStartWrapper(gym.Wrapper):
 
     def close(self) -> None:
         self._discard_saved_starts()
+        self._preparation, self._prepared = None, None
+        if self._spare is not None:
+            self._spare.close()
         super().close()
 
     def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:

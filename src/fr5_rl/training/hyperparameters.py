@@ -48,7 +48,10 @@ class ExpertStartSettings:
     ``step_back`` whenever the last ``window`` training episodes begun at the frontier
     succeeded at a rate of ``promote_at`` or more, up to 1, then once more to plain resets.
     Evaluation always starts from plain resets. ``episodes_per_replay`` starts are drawn at once
-    and met along one replay of the expert (1: one replay per episode, each on a new placement)."""
+    and met along one replay of the expert (1: one replay per episode, each on a new placement).
+    ``prepare_ahead`` prepares each environment's next start in a spare environment, in the time
+    its process would wait for the others (the same starts whatever the timing; only with
+    ``episodes_per_replay`` 1)."""
 
     max_steps: int
     first_reach_back: float
@@ -57,6 +60,7 @@ class ExpertStartSettings:
     step_back: float
     frontier_share: float
     episodes_per_replay: int = 1
+    prepare_ahead: bool = False
 
     def check(self, source: str) -> None:
         check_positive(source, **{"expert_start.max_steps": self.max_steps, "expert_start.window": self.window,
@@ -65,6 +69,11 @@ class ExpertStartSettings:
                             ("step_back", self.step_back)):
             if not 0.0 < value <= 1.0:
                 raise ConfigError(f"{source}: 'expert_start.{name}' must be in (0, 1], got {value!r}")
+        if self.prepare_ahead and self.episodes_per_replay > 1:
+            raise ConfigError(f"{source}: 'expert_start.prepare_ahead' prepares one start at a time; "
+                              f"set 'expert_start.episodes_per_replay' to 1 or 'prepare_ahead' to false")
+        if not isinstance(self.prepare_ahead, bool):
+            raise ConfigError(f"{source}: 'expert_start.prepare_ahead' must be true or false, got {self.prepare_ahead!r}")
         if not 0.0 <= self.frontier_share <= 1.0:
             raise ConfigError(f"{source}: 'expert_start.frontier_share' must be in [0, 1], got {self.frontier_share!r}")
 

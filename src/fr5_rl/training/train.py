@@ -56,8 +56,9 @@ def make_env_factory(task: str, env_overrides: Dict[str, Any], seed: int, rank: 
         if expert_start is not None:
             from .curriculum import ExpertStartWrapper
 
+            spare = FR5Env(task=task, config=env_overrides) if expert_start.prepare_ahead else None
             env = ExpertStartWrapper(env, expert_start.max_steps, frontier_share=expert_start.frontier_share,
-                                     episodes_per_replay=expert_start.episodes_per_replay)
+                                     episodes_per_replay=expert_start.episodes_per_replay, spare=spare)
         filename = str(monitor_dir / f"env{rank}") if monitor_dir is not None else None
         # Append when resuming; a new file needs its header (SB3 writes it only when overriding).
         fresh = filename is None or not Path(f"{filename}.{Monitor.EXT}").is_file()

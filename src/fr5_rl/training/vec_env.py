@@ -35,6 +35,15 @@ def split_evenly(n_items: int, n_chunks: int) -> List[range]:
     return [range(bounds[i], bounds[i + 1]) for i in range(n_chunks)]
 
 
+def _idle_work_of(env: gym.Env) -> Optional[Callable[[], bool]]:
+    """The ``idle_work`` method of the first wrapper round ``env`` that has one (None: none has)."""
+    while env is not None:
+        if callable(getattr(type(env), "idle_work", None)):
+            return env.idle_work
+        env = getattr(env, "env", None)
+    return None
+
+
 class _ChunkVecEnv(DummyVecEnv):
     """A chunk's ``DummyVecEnv`` whose step hands back the infos as they are.
 
@@ -44,6 +53,19 @@ class _ChunkVecEnv(DummyVecEnv):
     the same step (automatic reset, ``terminal_observation``, ``TimeLimit.truncated``), which
     the tests check against ``DummyVecEnv`` itself.
     """
+
+    def __init__(self, env_fns: List[Callable[[], gym.Env]]) -> None:
+        super().__init__(env_fns)
+        # Deferred work the environments' wrappers offer (`idle_work()`: one unit, False when
+        # none is left), e.g. the curriculum's next start prepared in a spare environment.
+        self._idle_work = [work for work in map(_idle_work_of, self.envs) if work is not None]
+
+    def idle_work(self) -> bool:
+        """One unit of the environments' deferred work; False when none of them has any."""
+        for work in self._idle_work:
+            if work():
+                return True
+        return False
 
     def step_wait(self):
         for index in range(self.num_envs):
@@ -90,6 +112,10 @@ def _worker(remote, parent_remote, factories: CloudpickleWrapper) -> None:
     parent_remote.close()
     venv = _ChunkVecEnv(factories.var)
     while True:
+        # Until the trainer's next message, the environments' deferred work (the trainer runs
+        # the policy, or an update, meanwhile; or its own chunk is slower).
+        while not remote.poll() and venv.idle_work():
+            pass
         try:
             command, data = remote.recv()
         except (EOFError, KeyboardInterrupt):
@@ -188,6 +214,10 @@ class ChunkedSubprocVecEnv(VecEnv):
         # The local chunk steps while the workers step theirs (sent in step_async).
         self.local.send(("step", self._actions[self.chunks[0].start:self.chunks[0].stop]))
         self.waiting = False
+        # While a worker is still stepping, this process does its own environments' deferred work.
+        workers, local = self.remotes[1:], self.local.venv
+        while not all(worker.poll() for worker in workers) and local.idle_work():
+            pass
         results = _receive_all(self.remotes)
         self.reset_infos = [info for result in results for info in result[4]]
         return (np.concatenate([r[0] for r in results]), np.concatenate([r[1] for r in results]),
