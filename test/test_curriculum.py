@@ -241,3 +241,120 @@ def test_one_replay_serves_several_starts():
     finally:
         del inner.step
         env.close()
+
+
+def _spare_wrapper(frontier_share: float = 0.5) -> ExpertStartWrapper:
+    return ExpertStartWrapper(FR5Env("grasp"), max_steps=70, reach_back=0.3, frontier_share=frontier_share,
+                              spare=FR5Env("grasp"))
+
+
+def _rollout_with_idle_work(env: ExpertStartWrapper, idle_units, steps: int = 160):
+    """Random actions with automatic resets; ``idle_units(step)`` units of idle work after each
+    step; a level change part-way. Everything the policy would see, step by step."""
+    actions = np.random.default_rng(4).uniform(-1, 1, (steps, 7)).astype(np.float32)
+    trace = []
+    observation, info = env.reset(seed=8)
+    trace.append((observation, info["expert_steps"]))
+    for step, action in enumerate(actions):
+        if step == 90:
+            env.set_reach_back(0.6, frontier_end=49)
+        observation, reward, terminated, truncated, info = env.step(action)
+        trace.append((observation, reward, terminated, truncated))
+        if terminated or truncated:
+            observation, info = env.reset()
+            trace.append((observation, info["expert_steps"]))
+        for _ in range(idle_units(step)):
+            env.idle_work()
+    return trace
+
+
+def test_a_spare_prepares_the_same_starts_however_its_work_is_spread():
+    """The spare's next start comes out the same whether it was prepared in idle time, all of
+    it, none of it (at the reset) or some of it: every observation, reward and start identical."""
+    traces = []
+    for idle_units in (lambda step: 0, lambda step: 1000, lambda step: step % 7):
+        env = _spare_wrapper()
+        try:
+            traces.append(_rollout_with_idle_work(env, idle_units))
+        finally:
+            env.close()
+    starts = [entry[1] for entry in traces[0] if len(entry) == 2]
+    assert len(starts) >= 6 and len(set(starts)) > 2  # several episodes, drawn starts
+    for other in traces[1:]:
+        assert len(other) == len(traces[0])
+        for expected, got in zip(traces[0], other):
+            for a, b in zip(expected, got):
+                np.testing.assert_array_equal(a, b)
+
+
+def test_a_prepared_start_is_played_without_a_replay_and_the_two_environments_swap():
+    env = _spare_wrapper(frontier_share=0.0)
+    spare_steps = {"count": 0}
+    try:
+        env.reset(seed=3)
+        live, spare = env.unwrapped, env._spare.unwrapped
+        original_step = spare.step
+
+        def counted(action):
+            spare_steps["count"] += 1
+            return original_step(action)
+
+        spare.step = counted
+        while env.idle_work():  # the process's idle time: the next start replayed in the spare
+            pass
+        prepared_steps = spare_steps["count"]
+        assert prepared_steps >= 49  # reach_back 0.3 of 70: a start at step 49 or later
+        observation, info = env.reset()
+        assert spare_steps["count"] == prepared_steps  # nothing replayed at the reset itself
+        assert env.unwrapped is spare and env._spare.unwrapped is live
+        assert info["expert_steps"] == prepared_steps == spare._steps
+        np.testing.assert_allclose(observation, spare._observe()[1], atol=1e-6)
+        state = spare.task_state()
+        assert state.fingers_object_contact == 2  # late along the expert's grasp: it holds the cup
+        _, _, terminated, truncated, _ = env.step(np.zeros(7, dtype=np.float32))
+        assert spare._steps == prepared_steps + 1  # the policy's steps go to the swapped-in one
+        del spare.step
+    finally:
+        env.close()
+
+
+def test_an_error_preparing_a_start_is_raised_by_the_reset_that_needs_it():
+    env = _spare_wrapper()
+    try:
+        env.reset(seed=5)
+        spare = env._spare.unwrapped
+
+        def broken(action):
+            raise RuntimeError("physics server lost")
+
+        spare.step = broken
+        assert env.idle_work()  # the error is kept, not raised in idle time
+        assert not env.idle_work()
+        with pytest.raises(RuntimeError, match="physics server lost"):
+            env.reset()
+    finally:
+        env.close()
+
+
+def test_an_attribute_of_the_environment_set_through_the_wrapper_reaches_the_spare_too():
+    env = _spare_wrapper()
+    try:
+        env.reset(seed=6)
+        env.unwrapped.marker, env._spare.unwrapped.marker = "x", "y"
+        assert env.set_wrapper_attr("marker", "z")
+        assert env.unwrapped.marker == "z" and env._spare.unwrapped.marker == "z"
+        env.set_wrapper_attr("probe", 1)  # nobody has it: it lands on the wrapper, as Gymnasium's does
+        assert env.probe == 1 and not hasattr(env.unwrapped, "probe")
+    finally:
+        env.close()
+
+
+def test_a_spare_needs_one_start_per_replay():
+    with pytest.raises(ValueError, match="episodes_per_replay"):
+        ExpertStartWrapper(FR5Env("grasp"), max_steps=70, episodes_per_replay=2, spare=FR5Env("grasp"))
+    from fr5_rl.config import ConfigError
+
+    settings = ExpertStartSettings(max_steps=70, first_reach_back=0.2, promote_at=0.6, window=100, step_back=0.1,
+                                   frontier_share=0.5, episodes_per_replay=2, prepare_ahead=True)
+    with pytest.raises(ConfigError, match="prepare_ahead"):
+        settings.check("ppo_grasp.yaml")

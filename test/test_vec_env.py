@@ -64,6 +64,42 @@ def test_chunked_steps_exactly_as_a_dummy_vec_env_through_automatic_resets():
         reference.close()
 
 
+def test_curriculum_starts_prepared_in_idle_time_change_nothing_the_trainer_sees():
+    """Grasp with expert-prefixed starts, each environment's next one prepared in a spare while its
+    process waits (the workers' and the trainer's chunk's idle time): the same observations,
+    rewards, dones and starts as a DummyVecEnv, which prepares every start at its reset."""
+    from fr5_rl.training.hyperparameters import ExpertStartSettings
+
+    settings = ExpertStartSettings(max_steps=70, first_reach_back=0.3, promote_at=0.6, window=100, step_back=0.1,
+                                   frontier_share=0.5, prepare_ahead=True)
+    env = {"grasp": {"max_steps": 85}}  # 15-36 policy steps after a start at 49-70: resets in every chunk
+    n_envs = 4
+    grasp = [make_env_factory("grasp", env, 5, rank, None, settings) for rank in range(n_envs)]
+    reference = DummyVecEnv(grasp)
+    chunked = ChunkedSubprocVecEnv(grasp, 2, start_method="forkserver")
+    try:
+        assert chunked.local.venv.idle_work() in (True, False)  # found through the Monitor
+        assert len(chunked.local.venv._idle_work) == 2
+        for venv in (reference, chunked):
+            venv.seed(17)
+            venv.env_method("set_reach_back", 0.3)
+        np.testing.assert_array_equal(chunked.reset(), reference.reset())
+        actions = np.random.default_rng(2).uniform(-1, 1, (80, n_envs, 7)).astype(np.float32)
+        starts = []
+        for action in actions:
+            obs_c, rew_c, done_c, info_c = chunked.step(action)
+            obs_r, rew_r, done_r, info_r = reference.step(action)
+            np.testing.assert_array_equal(obs_c, obs_r)
+            np.testing.assert_array_equal(rew_c, rew_r)
+            np.testing.assert_array_equal(done_c, done_r)
+            starts += [one_r["expert_steps"] for one_r, done in zip(info_r, done_r) if done]
+            assert [one.get("expert_steps") for one in info_c] == [one.get("expert_steps") for one in info_r]
+        assert len(starts) >= 2 * n_envs and all(49 <= start <= 70 for start in starts)
+    finally:
+        chunked.close()
+        reference.close()
+
+
 def test_attributes_and_methods_reach_the_right_environment_in_any_order():
     chunked = ChunkedSubprocVecEnv(factories(4), 2, start_method="forkserver")
     try:

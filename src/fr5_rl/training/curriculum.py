@@ -257,6 +257,14 @@ class ExpertStartWrapper(gym.Wrapper):
         while self._saved_starts:
             env.discard_state(self._saved_starts.pop()[1])
 
+    def set_wrapper_attr(self, name: str, value: Any, *, force: bool = True) -> bool:
+        """Gymnasium's, except that an attribute of the environment inside is set on the spare
+        too: the two swap at every automatic reset."""
+        if self._spare is not None and not hasattr(self, name) and self.env.set_wrapper_attr(name, value, force=False):
+            self._spare.set_wrapper_attr(name, value, force=False)
+            return True
+        return super().set_wrapper_attr(name, value, force=force)
+
     def close(self) -> None:
         self._discard_saved_starts()
         self._preparation, self._prepared = None, None
