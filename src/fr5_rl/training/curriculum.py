@@ -65,6 +65,12 @@ class ExpertStartWrapper(gym.Wrapper):
     ended it; after ``retries`` such prefixes, the episode starts plain. The prefix's steps
     count toward the task's step limit, as they would had the policy taken them.
 
+    With a ``spare``, every automatic reset plays a start the spare prepared while the episode
+    before it ran, and the two environments swap. Each start comes from its environment's own
+    random stream (the spare's seeded from the live one's seed), so the starts differ from those
+    drawn without a spare, but not with the time the preparation got: a level change finishes
+    the preparation under way before dropping it.
+
     :param env: an ``FR5Env`` (or a wrapper of one).
     :param max_steps: the longest expert prefix (control periods): about where the expert
         has the object lifted and is holding it.
