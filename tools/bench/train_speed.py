@@ -15,7 +15,8 @@ solve.
 
 ``--baseline-hyperparams FILE`` compares this code with itself instead: the task's default file
 against FILE (a variant that changes one setting), alternately, e.g. the curriculum's starts
-prepared ahead or at each reset. Writes train_speed_<task>_against_<FILE's stem>.json.
+prepared ahead or at each reset. The two may train to different weights; each one's repeats must
+not (``repeats_same_weights``). Writes train_speed_<task>_against_<FILE's stem>.json.
 
 The release is the commit in tools/bench/reference_release.yaml (``--reference REV``), exported by
 tools/bench/reference.py. Writes bench/results/train_speed_<task>.json and updates summary.json.
@@ -107,6 +108,8 @@ def main(argv: Optional[List[str]] = None) -> int:
               "old_median_s": old_s, "time_ratio": round(new_s / old_s, 3), "same_weights": len(hashes) == 1,
               "cpu_utilisation_new_median": statistics.median(r["cpu"]["utilisation"] for r in runs["new"]),
               "cpu_utilisation_old_median": statistics.median(r["cpu"]["utilisation"] for r in runs["old"]),
+              # Each side's repeats alike: training is deterministic whatever the timing.
+              "repeats_same_weights": all(len({r["policy_hash"] for r in runs[side]}) == 1 for side in runs),
               "runs": runs}
     if baseline is None:
         result.update(release=revision, commit=resolve(revision))
