@@ -18,6 +18,23 @@ def factories(n_envs, seed=3):
     return [make_env_factory("reach", ENV, seed, rank, None) for rank in range(n_envs)]
 
 
+def step_alike(chunked, reference, action):
+    """Step both vectorised envs; assert identical observations, rewards, dones and infos
+    (terminal observations included); the reference's dones and infos."""
+    obs_c, rew_c, done_c, info_c = chunked.step(action)
+    obs_r, rew_r, done_r, info_r = reference.step(action)
+    np.testing.assert_array_equal(obs_c, obs_r)
+    np.testing.assert_array_equal(rew_c, rew_r)
+    np.testing.assert_array_equal(done_c, done_r)
+    for one_c, one_r in zip(info_c, info_r):
+        assert one_c.keys() == one_r.keys()
+        for key in one_r.keys() - {"terminal_observation", "episode"}:  # episode holds wall times
+            assert one_c[key] == one_r[key], key
+        if "terminal_observation" in one_r:
+            np.testing.assert_array_equal(one_c["terminal_observation"], one_r["terminal_observation"])
+    return done_r, info_r
+
+
 def test_split_evenly_covers_every_index_once_in_near_equal_chunks():
     for n_items in range(1, 12):
         for n_chunks in range(1, n_items + 1):
@@ -45,18 +62,8 @@ def test_chunked_steps_exactly_as_a_dummy_vec_env_through_automatic_resets():
         actions = np.random.default_rng(0).uniform(-1, 1, (steps, n_envs, 7)).astype(np.float32)
         resets = 0
         for action in actions:
-            obs_c, rew_c, done_c, info_c = chunked.step(action)
-            obs_r, rew_r, done_r, info_r = reference.step(action)
-            np.testing.assert_array_equal(obs_c, obs_r)
-            np.testing.assert_array_equal(rew_c, rew_r)
-            np.testing.assert_array_equal(done_c, done_r)
-            for one_c, one_r in zip(info_c, info_r):
-                assert one_c.keys() == one_r.keys()
-                for key in one_r.keys() - {"terminal_observation", "episode"}:  # episode holds wall times
-                    assert one_c[key] == one_r[key], key
-                if "terminal_observation" in one_r:
-                    np.testing.assert_array_equal(one_c["terminal_observation"], one_r["terminal_observation"])
-                    resets += 1
+            _, infos = step_alike(chunked, reference, action)
+            resets += sum("terminal_observation" in info for info in infos)
         assert resets >= 2 * n_envs
         assert len(chunked.reset_infos) == n_envs
     finally:
@@ -87,13 +94,8 @@ def test_curriculum_starts_prepared_in_idle_time_change_nothing_the_trainer_sees
         actions = np.random.default_rng(2).uniform(-1, 1, (80, n_envs, 7)).astype(np.float32)
         starts = []
         for action in actions:
-            obs_c, rew_c, done_c, info_c = chunked.step(action)
-            obs_r, rew_r, done_r, info_r = reference.step(action)
-            np.testing.assert_array_equal(obs_c, obs_r)
-            np.testing.assert_array_equal(rew_c, rew_r)
-            np.testing.assert_array_equal(done_c, done_r)
-            starts += [one_r["expert_steps"] for one_r, done in zip(info_r, done_r) if done]
-            assert [one.get("expert_steps") for one in info_c] == [one.get("expert_steps") for one in info_r]
+            dones, infos = step_alike(chunked, reference, action)
+            starts += [info["expert_steps"] for info, done in zip(infos, dones) if done]
         assert len(starts) >= 2 * n_envs and all(49 <= start <= 70 for start in starts)
     finally:
         chunked.close()
