@@ -56,6 +56,7 @@ def test_chunked_steps_exactly_as_a_dummy_vec_env_through_automatic_resets():
     chunked = ChunkedSubprocVecEnv(factories(n_envs), 3, start_method="forkserver")
     try:
         assert chunked.chunks == [range(0, 2), range(2, 3), range(3, 5)]
+        assert not chunked.local.venv.has_idle_work  # plain resets: nothing deferred
         reference.seed(11)
         chunked.seed(11)
         np.testing.assert_array_equal(chunked.reset(), reference.reset())
@@ -85,8 +86,7 @@ def test_curriculum_starts_prepared_in_idle_time_change_nothing_the_trainer_sees
     reference = DummyVecEnv(grasp)
     chunked = ChunkedSubprocVecEnv(grasp, 2, start_method="forkserver")
     try:
-        assert chunked.local.venv.idle_work() in (True, False)  # found through the Monitor
-        assert len(chunked.local.venv._idle_work) == 2
+        assert chunked.local.venv.has_idle_work and len(chunked.local.venv._idle_work) == 2  # through the Monitor
         for venv in (reference, chunked):
             venv.seed(17)
             venv.env_method("set_reach_back", 0.3)

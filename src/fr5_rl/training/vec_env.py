@@ -59,6 +59,7 @@ class _ChunkVecEnv(DummyVecEnv):
         # Deferred work the environments' wrappers offer (`idle_work()`: one unit, False when
         # none is left), e.g. the curriculum's next start prepared in a spare environment.
         self._idle_work = [work for work in map(_idle_work_of, self.envs) if work is not None]
+        self.has_idle_work = bool(self._idle_work)  # without any, the processes do not even poll
 
     def idle_work(self) -> bool:
         """One unit of the environments' deferred work; False when none of them has any."""
@@ -114,7 +115,7 @@ def _worker(remote, parent_remote, factories: CloudpickleWrapper) -> None:
     while True:
         # Until the trainer's next message, the environments' deferred work (the trainer runs
         # the policy, or an update, meanwhile; or its own chunk is slower).
-        while not remote.poll() and venv.idle_work():
+        while venv.has_idle_work and not remote.poll() and venv.idle_work():
             pass
         try:
             command, data = remote.recv()
@@ -216,7 +217,7 @@ class ChunkedSubprocVecEnv(VecEnv):
         self.waiting = False
         # While a worker is still stepping, this process does its own environments' deferred work.
         workers, local = self.remotes[1:], self.local.venv
-        while not all(worker.poll() for worker in workers) and local.idle_work():
+        while local.has_idle_work and not all(worker.poll() for worker in workers) and local.idle_work():
             pass
         results = _receive_all(self.remotes)
         self.reset_infos = [info for result in results for info in result[4]]
