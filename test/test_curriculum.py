@@ -2,6 +2,7 @@
 test_training.py."""
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -248,6 +249,20 @@ def _spare_wrapper(frontier_share: float = 0.5) -> ExpertStartWrapper:
                               spare=FR5Env("grasp"))
 
 
+@pytest.fixture
+def spare_wrapper():
+    """Builds grasp wrappers with a spare (:func:`_spare_wrapper`) and closes them after the test."""
+    built = []
+
+    def build(frontier_share: float = 0.5) -> ExpertStartWrapper:
+        built.append(_spare_wrapper(frontier_share))
+        return built[-1]
+
+    yield build
+    for env in built:
+        env.close()
+
+
 def _rollout_with_idle_work(env: ExpertStartWrapper, idle_units, steps: int = 160):
     """Random actions with automatic resets; ``idle_units(step)`` units of idle work after each
     step; a level change part-way. Everything the policy would see, step by step."""
@@ -287,66 +302,57 @@ def test_a_spare_prepares_the_same_starts_however_its_work_is_spread():
                 np.testing.assert_array_equal(a, b)
 
 
-def test_a_prepared_start_is_played_without_a_replay_and_the_two_environments_swap():
-    env = _spare_wrapper(frontier_share=0.0)
+def test_a_prepared_start_is_played_without_a_replay_and_the_two_environments_swap(spare_wrapper):
+    env = spare_wrapper(frontier_share=0.0)
     spare_steps = {"count": 0}
-    try:
-        env.reset(seed=3)
-        live, spare = env.unwrapped, env._spare.unwrapped
-        original_step = spare.step
+    env.reset(seed=3)
+    live, spare = env.unwrapped, env._spare.unwrapped
+    original_step = spare.step
 
-        def counted(action):
-            spare_steps["count"] += 1
-            return original_step(action)
+    def counted(action):
+        spare_steps["count"] += 1
+        return original_step(action)
 
-        spare.step = counted
-        while env.idle_work():  # the process's idle time: the next start replayed in the spare
-            pass
-        prepared_steps = spare_steps["count"]
-        assert prepared_steps >= 49  # reach_back 0.3 of 70: a start at step 49 or later
-        observation, info = env.reset()
-        assert spare_steps["count"] == prepared_steps  # nothing replayed at the reset itself
-        assert env.unwrapped is spare and env._spare.unwrapped is live
-        assert info["expert_steps"] == prepared_steps == spare._steps
-        np.testing.assert_allclose(observation, spare._observe()[1], atol=1e-6)
-        state = spare.task_state()
-        assert state.fingers_object_contact == 2  # late along the expert's grasp: it holds the cup
-        _, _, terminated, truncated, _ = env.step(np.zeros(7, dtype=np.float32))
-        assert spare._steps == prepared_steps + 1  # the policy's steps go to the swapped-in one
-        del spare.step
-    finally:
-        env.close()
+    spare.step = counted
+    while env.idle_work():  # the process's idle time: the next start replayed in the spare
+        pass
+    prepared_steps = spare_steps["count"]
+    assert prepared_steps >= 49  # reach_back 0.3 of 70: a start at step 49 or later
+    observation, info = env.reset()
+    assert spare_steps["count"] == prepared_steps  # nothing replayed at the reset itself
+    assert env.unwrapped is spare and env._spare.unwrapped is live
+    assert info["expert_steps"] == prepared_steps == spare._steps
+    np.testing.assert_allclose(observation, spare._observe()[1], atol=1e-6)
+    state = spare.task_state()
+    assert state.fingers_object_contact == 2  # late along the expert's grasp: it holds the cup
+    _, _, terminated, truncated, _ = env.step(np.zeros(7, dtype=np.float32))
+    assert spare._steps == prepared_steps + 1  # the policy's steps go to the swapped-in one
+    del spare.step
 
 
-def test_an_error_preparing_a_start_is_raised_by_the_reset_that_needs_it():
-    env = _spare_wrapper()
-    try:
-        env.reset(seed=5)
-        spare = env._spare.unwrapped
+def test_an_error_preparing_a_start_is_raised_by_the_reset_that_needs_it(spare_wrapper):
+    env = spare_wrapper()
+    env.reset(seed=5)
+    spare = env._spare.unwrapped
 
-        def broken(action):
-            raise RuntimeError("physics server lost")
+    def broken(action):
+        raise RuntimeError("physics server lost")
 
-        spare.step = broken
-        assert env.idle_work()  # the error is kept, not raised in idle time
-        assert not env.idle_work()
-        with pytest.raises(RuntimeError, match="physics server lost"):
-            env.reset()
-    finally:
-        env.close()
+    spare.step = broken
+    assert env.idle_work()  # the error is kept, not raised in idle time
+    assert not env.idle_work()
+    with pytest.raises(RuntimeError, match="physics server lost"):
+        env.reset()
 
 
-def test_an_attribute_of_the_environment_set_through_the_wrapper_reaches_the_spare_too():
-    env = _spare_wrapper()
-    try:
-        env.reset(seed=6)
-        env.unwrapped.marker, env._spare.unwrapped.marker = "x", "y"
-        assert env.set_wrapper_attr("marker", "z")
-        assert env.unwrapped.marker == "z" and env._spare.unwrapped.marker == "z"
-        env.set_wrapper_attr("probe", 1)  # nobody has it: it lands on the wrapper, as Gymnasium's does
-        assert env.probe == 1 and not hasattr(env.unwrapped, "probe")
-    finally:
-        env.close()
+def test_an_attribute_of_the_environment_set_through_the_wrapper_reaches_the_spare_too(spare_wrapper):
+    env = spare_wrapper()
+    env.reset(seed=6)
+    env.unwrapped.marker, env._spare.unwrapped.marker = "x", "y"
+    assert env.set_wrapper_attr("marker", "z")
+    assert env.unwrapped.marker == "z" and env._spare.unwrapped.marker == "z"
+    env.set_wrapper_attr("probe", 1)  # nobody has it: it lands on the wrapper, as Gymnasium's does
+    assert env.probe == 1 and not hasattr(env.unwrapped, "probe")
 
 
 def test_a_spare_needs_one_start_per_replay():
@@ -358,3 +364,5 @@ def test_a_spare_needs_one_start_per_replay():
                                    frontier_share=0.5, episodes_per_replay=2, prepare_ahead=True)
     with pytest.raises(ConfigError, match="prepare_ahead"):
         settings.check("ppo_grasp.yaml")
+    with pytest.raises(ConfigError, match="true or false"):  # YAML's "yes" in quotes, say
+        dataclasses.replace(settings, episodes_per_replay=1, prepare_ahead="yes").check("ppo_grasp.yaml")

@@ -69,11 +69,11 @@ class ExpertStartSettings:
                             ("step_back", self.step_back)):
             if not 0.0 < value <= 1.0:
                 raise ConfigError(f"{source}: 'expert_start.{name}' must be in (0, 1], got {value!r}")
+        if not isinstance(self.prepare_ahead, bool):
+            raise ConfigError(f"{source}: 'expert_start.prepare_ahead' must be true or false, got {self.prepare_ahead!r}")
         if self.prepare_ahead and self.episodes_per_replay > 1:
             raise ConfigError(f"{source}: 'expert_start.prepare_ahead' prepares one start at a time; "
                               f"set 'expert_start.episodes_per_replay' to 1 or 'prepare_ahead' to false")
-        if not isinstance(self.prepare_ahead, bool):
-            raise ConfigError(f"{source}: 'expert_start.prepare_ahead' must be true or false, got {self.prepare_ahead!r}")
         if not 0.0 <= self.frontier_share <= 1.0:
             raise ConfigError(f"{source}: 'expert_start.frontier_share' must be in [0, 1], got {self.frontier_share!r}")
 
