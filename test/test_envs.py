@@ -389,6 +389,40 @@ def test_driving_into_table_is_a_collision(task, joints):
         env.close()
 
 
+def test_every_link_of_the_robot_meets_other_bodies():
+    """The robot's links are kept out of each other's broadphase pairs (their own collision
+    group); that must leave every link with a collision shape, the base included, colliding with
+    a body of Bullet's default group (a dynamic ball dropped into the link), and every link but
+    the static base with a static body (a box like the table). The base and the first link stand
+    on the table without touching it."""
+    env = make("grasp")
+    try:
+        env.reset(seed=0, options={"object_xy": FAR_CORNER})
+        client, robot = env.world.client, env.robot.body
+        links = [link for link in range(-1, p.getNumJoints(robot, physicsClientId=client))
+                 if p.getCollisionShapeData(robot, link, physicsClientId=client)]
+        assert len(links) >= 9  # the base, six arm links, the gripper's body and fingers
+        for link in links:
+            low, high = p.getAABB(robot, link, physicsClientId=client)
+            centre = [(a + b) / 2.0 for a, b in zip(low, high)]
+            size = max(b - a for a, b in zip(low, high))
+            ball = p.createMultiBody(0.1, p.createCollisionShape(p.GEOM_SPHERE, radius=size, physicsClientId=client),
+                                     -1, centre, physicsClientId=client)
+            box = p.createMultiBody(0.0, p.createCollisionShape(p.GEOM_BOX, halfExtents=[size] * 3,
+                                                                physicsClientId=client),
+                                    -1, centre, physicsClientId=client)
+            p.performCollisionDetection(physicsClientId=client)
+            assert p.getContactPoints(bodyA=robot, bodyB=ball, linkIndexA=link, physicsClientId=client), link
+            touches_box = bool(p.getContactPoints(bodyA=robot, bodyB=box, linkIndexA=link, physicsClientId=client))
+            assert touches_box == (link >= 0), link  # the base is static as the box is: never paired
+            p.removeBody(ball, physicsClientId=client)
+            p.removeBody(box, physicsClientId=client)
+        table_contacts = p.getContactPoints(bodyA=robot, bodyB=env.world.table_id, physicsClientId=client)
+        assert not table_contacts  # standing on it is not touching it
+    finally:
+        env.close()
+
+
 def test_scripted_downward_motion_into_table_is_a_collision():
     """Straight down under IK, gripper pointing down, until something touches the table."""
     env = make("reach")
