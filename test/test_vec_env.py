@@ -7,7 +7,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from fr5_rl.training.train import make_env_factory, make_vec_env
-from fr5_rl.training.vec_env import ChunkedSubprocVecEnv, split_evenly
+from fr5_rl.training.vec_env import ChunkedSubprocVecEnv, split_evenly, split_with_lighter_first
 
 # Randomisation on, so that every environment's own seeded draws matter.
 ENV = {"randomisation": {"enabled": True, "action_latency_steps": [0, 1], "observation_noise_std": 0.002,
@@ -48,6 +48,25 @@ def test_split_evenly_covers_every_index_once_in_near_equal_chunks():
         split_evenly(3, 0)
 
 
+def test_split_with_a_lighter_first_chunk_covers_every_index_once():
+    assert split_with_lighter_first(16, 2, 1) == [range(0, 7), range(7, 16)]
+    assert split_with_lighter_first(16, 3, 1) == [range(0, 4), range(4, 10), range(10, 16)]
+    assert split_with_lighter_first(16, 2, 0) == split_evenly(16, 2)
+    assert split_with_lighter_first(4, 4, 1) == split_evenly(4, 4)  # a chunk keeps one item
+    for n_items in range(1, 12):
+        for n_chunks in range(1, n_items + 1):
+            for fewer in range(0, 4):
+                chunks = split_with_lighter_first(n_items, n_chunks, fewer)
+                assert [i for chunk in chunks for i in chunk] == list(range(n_items))
+                sizes = [len(chunk) for chunk in chunks]
+                assert len(sizes) == n_chunks and min(sizes) >= 1
+                assert max(sizes[1:], default=0) - min(sizes[1:], default=0) <= 1
+                even_first = len(split_evenly(n_items, n_chunks)[0])
+                assert sizes[0] == (n_items if n_chunks == 1 else max(even_first - fewer, 1))
+    with pytest.raises(ValueError, match="first_fewer"):
+        split_with_lighter_first(8, 2, -1)
+
+
 def test_chunked_steps_exactly_as_a_dummy_vec_env_through_automatic_resets():
     """Same seeds, same actions: identical observations, rewards, dones, infos and terminal
     observations over several 20-step episodes (so automatic resets happen in every chunk)."""
@@ -84,9 +103,10 @@ def test_curriculum_starts_prepared_in_idle_time_change_nothing_the_trainer_sees
     n_envs = 4
     grasp = [make_env_factory("grasp", env, 5, rank, None, settings) for rank in range(n_envs)]
     reference = DummyVecEnv(grasp)
-    chunked = ChunkedSubprocVecEnv(grasp, 2, start_method="forkserver")
+    chunked = ChunkedSubprocVecEnv(grasp, 2, start_method="forkserver", trainer_fewer=1)  # as train.py builds it
     try:
-        assert chunked.local.venv.has_idle_work and len(chunked.local.venv._idle_work) == 2  # through the Monitor
+        assert chunked.chunks == [range(0, 1), range(1, 4)]
+        assert chunked.local.venv.has_idle_work and len(chunked.local.venv._idle_work) == 1  # through the Monitor
         for venv in (reference, chunked):
             venv.seed(17)
             venv.env_method("set_reach_back", 0.3)

@@ -35,6 +35,22 @@ def split_evenly(n_items: int, n_chunks: int) -> List[range]:
     return [range(bounds[i], bounds[i + 1]) for i in range(n_chunks)]
 
 
+def split_with_lighter_first(n_items: int, n_chunks: int, first_fewer: int) -> List[range]:
+    """:func:`split_evenly`, with the first chunk ``first_fewer`` items lighter (at least one
+    item left in it; a single chunk holds everything) and the rest spread evenly over the others.
+
+    :raises ValueError: ``n_chunks`` is not between 1 and ``n_items``, or ``first_fewer`` < 0.
+    """
+    if first_fewer < 0:
+        raise ValueError(f"first_fewer must be 0 or more, got {first_fewer}")
+    even = split_evenly(n_items, n_chunks)
+    first = max(len(even[0]) - first_fewer, 1)
+    if n_chunks == 1 or first == len(even[0]):
+        return even
+    return [range(0, first), *(range(first + chunk.start, first + chunk.stop)
+                               for chunk in split_evenly(n_items - first, n_chunks - 1))]
+
+
 def _idle_work_of(env: gym.Env) -> Optional[Callable[[], bool]]:
     """The ``idle_work`` method of the first wrapper round ``env`` that has one (None: none has)."""
     while env is not None:
@@ -174,11 +190,14 @@ class ChunkedSubprocVecEnv(VecEnv):
     :param n_chunks: how many chunks, i.e. cores used while stepping (>= 2; the trainer's own
         process counts as one).
     :param start_method: ``forkserver`` or ``spawn`` (``fork`` is unsafe next to torch's threads).
+    :param trainer_fewer: environments fewer in the trainer's own chunk than an even split gives
+        it, spread over the workers' chunks (:func:`split_with_lighter_first`). Speed only: each
+        environment steps the same wherever it runs.
     """
 
     def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], n_chunks: int,
-                 start_method: str = "forkserver") -> None:
-        self.chunks = split_evenly(len(env_fns), n_chunks)
+                 start_method: str = "forkserver", trainer_fewer: int = 0) -> None:
+        self.chunks = split_with_lighter_first(len(env_fns), n_chunks, trainer_fewer)
         if n_chunks < 2:
             raise ValueError("ChunkedSubprocVecEnv needs at least 2 chunks; use DummyVecEnv for one")
         context = mp.get_context(start_method)
