@@ -108,7 +108,7 @@ def make_vec_env(task: str, env_overrides: Dict[str, Any], n_envs: int, seed: in
     # Starts prepared ahead: a worker prepares its spares while the trainer runs the policy and
     # the updates, the trainer's own chunk only while it waits for a worker. One environment
     # fewer in the trainer's chunk gives it that wait: grasp from reward, 16 environments on two
-    # cores, trained 0.91x as long as with 8 and 8 (docs/experiments.md).
+    # cores, took 0.91x the time of 8 and 8 (docs/experiments.md).
     trainer_fewer = 1 if expert_start is not None and expert_start.prepare_ahead else 0
     return ChunkedSubprocVecEnv(factories, processes, start_method=start_method, trainer_fewer=trainer_fewer)
 
