@@ -101,10 +101,11 @@ def test_curriculum_starts_prepared_in_idle_time_change_nothing_the_trainer_sees
                                    frontier_share=0.5, prepare_ahead=True)
     env = {"grasp": {"max_steps": 85}}  # 15-36 policy steps after a start at 49-70: resets in every chunk
     n_envs = 4
-    grasp = [make_env_factory("grasp", env, 5, rank, None, settings) for rank in range(n_envs)]
-    reference = DummyVecEnv(grasp)
-    chunked = ChunkedSubprocVecEnv(grasp, 2, start_method="forkserver", trainer_fewer=1)  # as train.py builds it
+    reference = make_vec_env("grasp", env, n_envs, 5, None, subprocess=True, processes=1, expert_start=settings)
+    chunked = make_vec_env("grasp", env, n_envs, 5, None, subprocess=True, processes=2, expert_start=settings)
     try:
+        assert isinstance(reference, DummyVecEnv) and isinstance(chunked, ChunkedSubprocVecEnv)
+        # Starts prepared ahead: the trainer's own chunk one environment lighter than an even split.
         assert chunked.chunks == [range(0, 1), range(1, 4)]
         assert chunked.local.venv.has_idle_work and len(chunked.local.venv._idle_work) == 1  # through the Monitor
         for venv in (reference, chunked):
