@@ -423,6 +423,30 @@ def test_every_link_of_the_robot_meets_other_bodies():
         env.close()
 
 
+def test_every_joint_is_capped_at_the_fastest_rated_joint_speed():
+    """PyBullet keeps one speed cap per body: it must be the fastest arm joint's rated speed on
+    every joint. Driven far beyond it, no joint goes faster, and the arm reaches it (a cap set
+    per joint with the fingers last held the whole arm at the fingers' 0.08 m/s)."""
+    env = make("reach")
+    try:
+        env.reset(seed=0, options={"object_xy": FAR_CORNER})
+        client, robot = env.world.client, env.robot.body
+        cap = float(max(env.robot_spec.velocity_limits))
+        assert env.robot.joint_speed_cap == cap
+        joints = env.robot.all_joints
+        p.setJointMotorControlArray(robot, joints, p.VELOCITY_CONTROL, targetVelocities=[10.0] * len(joints),
+                                    forces=[1e4] * len(joints), physicsClientId=client)
+        fastest = 0.0
+        for _ in range(5):
+            p.stepSimulation(physicsClientId=client)
+            speeds = [abs(state[1]) for state in p.getJointStates(robot, joints, physicsClientId=client)]
+            assert max(speeds) <= cap + 1e-9, speeds
+            fastest = max(fastest, max(speeds[:len(env.robot.arm_joints)]))
+        assert fastest == pytest.approx(cap, abs=1e-6)
+    finally:
+        env.close()
+
+
 def test_scripted_downward_motion_into_table_is_a_collision():
     """Straight down under IK, gripper pointing down, until something touches the table."""
     env = make("reach")

@@ -107,9 +107,12 @@ def run_seeded_episodes(env, actions: np.ndarray, first_seed: int) -> List[int]:
 def record_episodes(env, actions: np.ndarray, first_seed: int) -> List[Dict[str, Any]]:
     """The same run as :func:`run_seeded_episodes`, untimed, recording every motor command the
     env sends (the eight position targets PyBullet gets, fingers included) with the number of
-    physics steps it stands for, the joint state each episode starts from and the joint angles
-    it ends with. Randomised episodes (a command late within the period, a physics step drawn
-    per episode) are recorded as they run: one entry per motor call."""
+    physics steps it stands for, the joint state each episode starts from, the joint angles it
+    ends with, and whether the robot touched anything (a contact at the end of any control step).
+    Randomised episodes (a command late within the period, a physics step drawn per episode) are
+    recorded as they run: one entry per motor call."""
+    import pybullet as p
+
     robot, world = env.robot, env.world
     original_command, original_step, original_step_physics = robot.command, world.step, world.step_physics
     episodes: List[Dict[str, Any]] = []
@@ -132,7 +135,7 @@ def record_episodes(env, actions: np.ndarray, first_seed: int) -> List[Dict[str,
     def reset(seed=None, options=None):
         if episodes:
             episodes[-1]["final_joint_positions"] = env.joint_positions()
-        episodes.append({"seed": seed, "commands": [], "steps": 0})
+        episodes.append({"seed": seed, "commands": [], "steps": 0, "touched": False})
         result = original_reset(seed=seed, options=options)
         episodes[-1].update(commands=[], physics_dt=world.physics_dt,  # reset's own hold command: replayed by the reset
                             start=robot.joint_lists_with_fingers()[0], object_start=env.object_pose()[:2])
@@ -140,7 +143,10 @@ def record_episodes(env, actions: np.ndarray, first_seed: int) -> List[Dict[str,
 
     def env_step(action):
         episodes[-1]["steps"] += 1
-        return original_env_step(action)
+        result = original_env_step(action)
+        if not episodes[-1]["touched"]:
+            episodes[-1]["touched"] = bool(p.getContactPoints(bodyA=robot.body, physicsClientId=world.client))
+        return result
 
     robot.command, world.step, world.step_physics, env.reset, env.step = command, step, step_physics, reset, env_step
     try:
@@ -201,16 +207,18 @@ def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False)
     return {"seconds": seconds, "max_final_joint_deviation_rad": deviation}
 
 
-def replay_urdf_only(env, episodes: List[Dict[str, Any]]) -> float:
+def replay_urdf_only(env, episodes: List[Dict[str, Any]]) -> Dict[str, float]:
     """Bare PyBullet stepping the same URDF alone (no table, no object) through the same
     commands: its own client with the env's gravity, physics step (per episode, as drawn),
-    solver iterations, joint velocity caps and joint damping; per episode a timed
-    ``resetJointStatesMultiDof`` to the env's start, then per control step the recorded position
-    targets and ``stepSimulation`` calls. The arm moves as in the env until it touches something
-    there. Returns the timed seconds."""
+    solver iterations, joint speed cap (the robot's own function: PyBullet keeps one per body)
+    and joint damping; per episode a timed ``resetJointStatesMultiDof`` to the env's start, then
+    per control step the recorded position targets and ``stepSimulation`` calls. The arm moves as
+    in the env until it touches something there. Returns the timed seconds and, of the episodes
+    in which the env's robot touched nothing, the share that ended where the env's did (every
+    joint within 1e-6 rad): the check that the reference is the same motion (1.0 when it is)."""
     import pybullet as p
 
-    from fr5_rl.sim.robot import urdf_for_pybullet
+    from fr5_rl.sim.robot import cap_joint_speeds, urdf_for_pybullet
 
     robot, sim = env.robot, env.cfg.simulation_for(env.task.name)
     client = p.connect(p.DIRECT)
@@ -221,13 +229,11 @@ def replay_urdf_only(env, episodes: List[Dict[str, Any]]) -> float:
         body = p.loadURDF(urdf_for_pybullet(), basePosition=[0, 0, 0], useFixedBase=True,
                           flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client)
         joints = robot.all_joints
-        caps = [float(v) for v in robot.spec.velocity_limits] + [robot.spec.finger_velocity] * len(robot.finger_joints)
-        for index, cap in zip(joints, caps):
-            p.changeDynamics(body, index, maxJointVelocity=cap, physicsClientId=client)
+        cap_joint_speeds(body, robot.spec, client)
         gains = dict(forces=robot._forces, positionGains=robot._position_gains,
                      velocityGains=robot._velocity_gains, physicsClientId=client)
         motor, step_simulation, perf = p.setJointMotorControlArray, p.stepSimulation, time.perf_counter
-        zeros, seconds = [[0.0]] * len(joints), 0.0
+        zeros, seconds, untouched, same_motion = [[0.0]] * len(joints), 0.0, 0, 0
         for episode in episodes:
             env.reset(seed=episode["seed"])  # the episode's damping, as the env drew it
             p.setTimeStep(episode["physics_dt"], physicsClientId=client)
@@ -241,9 +247,13 @@ def replay_urdf_only(env, episodes: List[Dict[str, Any]]) -> float:
                 for _ in range(physics_steps):
                     step_simulation(physicsClientId=client)
             seconds += perf() - t0
+            if not episode["touched"]:
+                final = [state[0] for state in p.getJointStates(body, robot.arm_joints, physicsClientId=client)]
+                untouched += 1
+                same_motion += bool(np.max(np.abs(np.subtract(final, episode["final_joint_positions"]))) < 1e-6)
     finally:
         p.disconnect(physicsClientId=client)
-    return seconds
+    return {"seconds": seconds, "same_motion_share": same_motion / untouched if untouched else float("nan")}
 
 
 def resting_step_seconds(env, steps: int, seed: int) -> float:
@@ -304,7 +314,8 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0,
         physics_steps = sum(n for e in episodes for _, n in e["commands"])
         replay = replay_bare(env, episodes)
         floor = replay_bare(env, episodes, with_queries=True)
-        urdf_s = replay_urdf_only(env, episodes)
+        urdf = replay_urdf_only(env, episodes)
+        urdf_s = urdf["seconds"]
         resting_s = resting_step_seconds(env, steps, first_seed)
         per_repeat.append({
             "env_seconds": round(env_s, 4),
@@ -322,6 +333,7 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0,
             "bare_urdf_only_step_us": 1e6 * urdf_s / steps,
             "bare_urdf_only_steps_per_s": steps / urdf_s,
             "ratio_to_bare_urdf_only": urdf_s / env_s,
+            "bare_urdf_only_untouched_episodes_same_motion": urdf["same_motion_share"],
             "bare_replay_with_queries_step_us": 1e6 * floor["seconds"] / steps,
             "overhead_floor_with_queries": floor["seconds"] / replay["seconds"],
             "resting_physics_substep_us": 1e6 * resting_s / (steps * substeps),
@@ -349,8 +361,8 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0,
         **{key: median(key) for key in (
             "steps_per_s", "real_time_factor", "env_step_us", "bare_replay_step_us", "bare_replay_steps_per_s",
             "overhead", "ratio_to_bare_world", "bare_urdf_only_step_us", "bare_urdf_only_steps_per_s",
-            "ratio_to_bare_urdf_only", "bare_replay_with_queries_step_us", "overhead_floor_with_queries",
-            "resting_physics_substep_us", "overhead_over_resting_scene")},
+            "ratio_to_bare_urdf_only", "bare_urdf_only_untouched_episodes_same_motion", "bare_replay_with_queries_step_us",
+            "overhead_floor_with_queries", "resting_physics_substep_us", "overhead_over_resting_scene")},
         "per_repeat": per_repeat,
         "targets": {
             "real_time_factor_min": TARGETS[env_id]["real_time_factor"],

@@ -48,6 +48,26 @@ def urdf_for_pybullet(urdf_path: Path | None = None) -> str:
 _ROBOT_LINKS_COLLISION_GROUP = 1 << 6
 
 
+def cap_joint_speeds(body: int, robot: RobotSpec, client: int) -> float:
+    """Cap the speed of every joint of ``body`` at the fastest arm joint's rated speed; returns
+    the cap (rad/s, and m/s for the fingers).
+
+    PyBullet holds one speed cap per body, not one per joint: ``changeDynamics(maxJointVelocity=)``
+    sets the multibody's cap on every coordinate, and the last call wins (a cap given per joint,
+    fingers last, held the whole arm at the fingers' 0.08 m/s). With the fastest rated speed no
+    joint is held below its own. Each joint's own limit is kept where it is set: the commands
+    (the action scaling, the safety gate) never ask a joint for more, and the fingers' target
+    ramps at the gripper's rated speed (:meth:`FR5Robot.command`).
+
+    :param body: PyBullet body id of the robot, in ``client``.
+    :param robot: the robot's rated limits (config/robot.yaml).
+    :param client: PyBullet client id.
+    """
+    cap = float(max(robot.velocity_limits))
+    p.changeDynamics(body, -1, maxJointVelocity=cap, physicsClientId=client)
+    return cap
+
+
 class FR5Robot:
     """FR5 arm + PGI-140-80 gripper under position control, as the real driver exposes it.
 
@@ -92,10 +112,7 @@ class FR5Robot:
         self._finger_step = robot.finger_velocity * sim_cfg.control_dt
         self._finger_target = robot.finger_travel
         self._joint_damping: Optional[float] = None  # unknown until set
-        for index in self.finger_joints:
-            p.changeDynamics(self.body, index, maxJointVelocity=robot.finger_velocity, physicsClientId=client)
-        for index, velocity in zip(self.arm_joints, robot.velocity_limits):
-            p.changeDynamics(self.body, index, maxJointVelocity=float(velocity), physicsClientId=client)
+        self.joint_speed_cap = cap_joint_speeds(self.body, robot, client)
         self._keep_links_out_of_each_others_pairs()
 
     def _keep_links_out_of_each_others_pairs(self) -> None:
