@@ -457,13 +457,15 @@ def print_env_table(rows: List[Dict[str, Any]]) -> None:
     print("ratio = env steps/s / bare steps/s, measured in this run (>= 0.7 wanted): 'bare world' replays the env's "
           "motor commands in its own world (robot, table, object) with a bare reset per episode; 'bare urdf' the "
           "same commands on the URDF alone (no table, no object). Both: same physics step, solver iterations, "
-          "substeps, position targets every period, resets at the same episode lengths.")
+          "joint speed cap, substeps, position targets every period, resets at the same episode lengths.")
     for r in rows:
         print(f"{r['env_id']} {r['variant']}: {r['env_step_us']:.0f}us per env step (resets included), the bare world "
               f"{r['bare_replay_step_us']:.0f}us ({r['substeps']} substeps plain), the bare world plus the four "
               f"state queries an env needs {r['bare_replay_with_queries_step_us']:.0f}us "
               f"({r['overhead_floor_with_queries']:.2f}x, the floor for a Python env); the resting scene steps in "
-              f"{r['resting_physics_substep_us']:.0f}us per substep")
+              f"{r['resting_physics_substep_us']:.0f}us per substep; the URDF alone moved as the env's arm in "
+              f"{100 * r['bare_urdf_only_untouched_episodes_same_motion']:.0f} % of the episodes where that touched "
+              "nothing")
     verdicts = env_verdicts({r["env_id"]: r for r in rows if r["variant"] == "plain"})
     print("targets (plain): " + ", ".join(f"{name} {v['verdict']}" for name, v in sorted(verdicts.items()))
           + f" (reach >= {TARGETS['FR5Reach-v0']['real_time_factor']:.0f}x real time, grasp >= "
