@@ -47,6 +47,7 @@ see tools/bench/benchlib.py). Only time.perf_counter is used for timing.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shutil
 import statistics
@@ -344,7 +345,8 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0,
     env.close()
 
     def median(key: str) -> float:
-        return float(statistics.median(r[key] for r in per_repeat))
+        values = [r[key] for r in per_repeat if not math.isnan(r[key])]  # NaN: a repeat had nothing to compare
+        return float(statistics.median(values)) if values else float("nan")
 
     rtf = median("real_time_factor")
     overhead = median("overhead")
