@@ -48,9 +48,9 @@ def urdf_for_pybullet(urdf_path: Path | None = None) -> str:
 _ROBOT_LINKS_COLLISION_GROUP = 1 << 6
 
 
-def cap_joint_speeds(body: int, robot: RobotSpec, client: int) -> float:
-    """Cap the speed of every joint of ``body`` at the fastest arm joint's rated speed; returns
-    the cap (rad/s, and m/s for the fingers).
+def cap_joint_speeds(body: int, robot: RobotSpec, client: int) -> None:
+    """Cap the speed of every joint of ``body`` at the fastest arm joint's rated speed (rad/s,
+    read as m/s by the fingers).
 
     PyBullet holds one speed cap per body, not one per joint: ``changeDynamics(maxJointVelocity=)``
     sets the multibody's cap on every coordinate, and the last call wins (a cap given per joint,
@@ -63,9 +63,7 @@ def cap_joint_speeds(body: int, robot: RobotSpec, client: int) -> float:
     :param robot: the robot's rated limits (config/robot.yaml).
     :param client: PyBullet client id.
     """
-    cap = float(max(robot.velocity_limits))
-    p.changeDynamics(body, -1, maxJointVelocity=cap, physicsClientId=client)
-    return cap
+    p.changeDynamics(body, -1, maxJointVelocity=float(max(robot.velocity_limits)), physicsClientId=client)
 
 
 class FR5Robot:
@@ -112,7 +110,7 @@ class FR5Robot:
         self._finger_step = robot.finger_velocity * sim_cfg.control_dt
         self._finger_target = robot.finger_travel
         self._joint_damping: Optional[float] = None  # unknown until set
-        self.joint_speed_cap = cap_joint_speeds(self.body, robot, client)
+        cap_joint_speeds(self.body, robot, client)
         self._keep_links_out_of_each_others_pairs()
 
     def _keep_links_out_of_each_others_pairs(self) -> None:
