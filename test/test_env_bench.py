@@ -24,3 +24,21 @@ def test_the_urdf_alone_moves_as_the_env_s_arm_in_every_untouched_episode(task):
         assert bench.replay_urdf_only(env, episodes)["same_motion_share"] == 1.0
     finally:
         env.close()
+
+
+def test_the_minimal_env_replays_the_same_motion_and_runs_once_per_env_step(monkeypatch):
+    env = FR5Env(task="reach")
+    try:
+        actions = np.random.default_rng(5).uniform(-1.0, 1.0, (400, 7)).astype(np.float32)
+        episodes = bench.record_episodes(env, actions, first_seed=11)
+        stepped = []
+        minimal_step = bench._minimal_env_step
+        monkeypatch.setattr(bench, "_minimal_env_step", lambda action, *results: stepped.append(action)
+                            or minimal_step(action, *results))
+        replay = bench.replay_bare(env, episodes, minimal_env=True)
+        assert len(stepped) == len(actions)
+        assert all(np.array_equal(a, b) for a, b in zip(stepped, actions))  # each step's own action, in order
+        assert replay["max_final_joint_deviation_rad"] < 1e-4
+        assert replay["env_reset_seconds"] > 0.0
+    finally:
+        env.close()

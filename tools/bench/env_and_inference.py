@@ -26,7 +26,11 @@ warm-up steps are not), median of the repeats:
 - for comparison, ``stepSimulation`` of the scene at rest right after a reset (nothing moves,
   the object sleeps), which is cheaper than the moving scene the env simulates;
 - the floor: the replay plus the four simulator queries every step needs (joints, tcp link,
-  object pose, contacts), their results unused.
+  object pose, contacts), their results unused;
+- a minimal env: the floor plus the least Python any gymnasium env of these tasks runs per step
+  (the action clipped, an observation array, a distance reward, a success test, an ``info``
+  dict), with the bare reset and with this env's own reset: how near 0.7 a Python env on
+  PyBullet can come at all.
 
 Against the previous release (``--reference REV``, default tools/bench/reference_release.yaml;
 ``--no-reference`` skips it): tools/bench/env_probe.py runs the same random actions with resets
@@ -109,7 +113,8 @@ def record_episodes(env, actions: np.ndarray, first_seed: int) -> List[Dict[str,
     """The same run as :func:`run_seeded_episodes`, untimed, recording every motor command the
     env sends (the eight position targets PyBullet gets, fingers included) with the number of
     physics steps it stands for, the joint state each episode starts from, the joint angles it
-    ends with, and whether the robot touched anything (a contact at the end of any control step).
+    ends with, whether the robot touched anything (a contact at the end of any control step),
+    the actions, and the index of the command each control period ended with.
     Randomised episodes (a command late within the period, a physics step drawn per episode) are
     recorded as they run: one entry per motor call."""
     import pybullet as p
@@ -136,7 +141,7 @@ def record_episodes(env, actions: np.ndarray, first_seed: int) -> List[Dict[str,
     def reset(seed=None, options=None):
         if episodes:
             episodes[-1]["final_joint_positions"] = env.joint_positions()
-        episodes.append({"seed": seed, "commands": [], "steps": 0, "touched": False})
+        episodes.append({"seed": seed, "commands": [], "steps": 0, "touched": False, "period_ends": [], "actions": []})
         result = original_reset(seed=seed, options=options)
         episodes[-1].update(commands=[], physics_dt=world.physics_dt,  # reset's own hold command: replayed by the reset
                             start=robot.joint_lists_with_fingers()[0], object_start=env.object_pose()[:2])
@@ -145,6 +150,8 @@ def record_episodes(env, actions: np.ndarray, first_seed: int) -> List[Dict[str,
     def env_step(action):
         episodes[-1]["steps"] += 1
         result = original_env_step(action)
+        episodes[-1]["period_ends"].append(len(episodes[-1]["commands"]) - 1)
+        episodes[-1]["actions"].append(action)
         if not episodes[-1]["touched"]:
             episodes[-1]["touched"] = bool(p.getContactPoints(bodyA=robot.body, physicsClientId=world.client))
         return result
@@ -158,7 +165,8 @@ def record_episodes(env, actions: np.ndarray, first_seed: int) -> List[Dict[str,
     return episodes
 
 
-def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False) -> Dict[str, float]:
+def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False,
+                minimal_env: bool = False) -> Dict[str, float]:
     """Bare PyBullet doing the env's physics in the env's own world (robot, table, object): per
     control step the recorded ``setJointMotorControlArray`` call(s) and their ``stepSimulation``
     calls, nothing else. Each episode's start is rebuilt with the env's own seeded reset (not
@@ -169,7 +177,14 @@ def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False)
 
     ``with_queries`` adds, per control step, the four state queries any environment of this
     task needs (joint states, tcp link state, object pose, the robot's contacts) and does
-    nothing with their results: the floor a Python environment on PyBullet can reach."""
+    nothing with their results: the floor a Python environment on PyBullet can reach.
+
+    ``minimal_env`` instead ends every control period with the least any gymnasium environment
+    of these tasks does in Python: the action to clipped floats, the four queries, an
+    observation array (joint angles and velocities, tcp and object positions), a distance reward
+    with an action penalty, a success test and an ``info`` dict, once per control period.
+    ``env_reset_seconds`` is the time of the env's own resets (run untimed before each episode to
+    rebuild its start): added to a minimal env's time, it gives one that resets as this env does."""
     import pybullet as p
 
     client = env.world.client
@@ -182,30 +197,54 @@ def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False)
                  physicsClientId=client)
     get_joints, get_link, get_pose, get_contacts = (
         p.getJointStates, p.getLinkState, p.getBasePositionAndOrientation, p.getContactPoints)
-    seconds, deviation = 0.0, 0.0
+    seconds, deviation, env_reset_seconds = 0.0, 0.0, 0.0
     for episode in episodes:
+        t0 = perf()
         env.reset(seed=episode["seed"])
+        env_reset_seconds += perf() - t0
         commands, start, zeros = episode["commands"], [[v] for v in episode["start"]], [[0.0]] * len(joints)
         obj, (position, orientation) = env.world.object_id, episode["object_start"]
+        period_ends, actions = iter(episode["period_ends"]), iter(episode["actions"])
+        period_end = next(period_ends, -1)
         t0 = perf()
         reset_joints(body, joints, start, targetVelocities=zeros, physicsClientId=client)
         reset_base(obj, position, orientation, physicsClientId=client)
         settling = True  # the object sleeps from the end of its first physics step, as in the env
-        for targets, physics_steps in commands:
+        for index, (targets, physics_steps) in enumerate(commands):
             motor(body, joints, p.POSITION_CONTROL, targetPositions=targets, **gains)
             for _ in range(physics_steps):
                 step_simulation(physicsClientId=client)
                 if settling:
                     change_dynamics(obj, -1, activationState=p.ACTIVATION_STATE_SLEEP, physicsClientId=client)
                     settling = False
-            if with_queries and physics_steps:
+            if minimal_env:
+                if index == period_end:
+                    period_end = next(period_ends, -1)
+                    _minimal_env_step(next(actions), get_joints(body, joints, physicsClientId=client),
+                                      get_link(body, tcp, computeForwardKinematics=1, physicsClientId=client),
+                                      get_pose(obj, physicsClientId=client), get_contacts(bodyA=body, physicsClientId=client))
+            elif with_queries and physics_steps:
                 get_joints(body, joints, physicsClientId=client)
                 get_link(body, tcp, computeForwardKinematics=1, physicsClientId=client)
                 get_pose(obj, physicsClientId=client)
                 get_contacts(bodyA=body, physicsClientId=client)
         seconds += perf() - t0
         deviation = max(deviation, float(np.max(np.abs(env.joint_positions() - episode["final_joint_positions"]))))
-    return {"seconds": seconds, "max_final_joint_deviation_rad": deviation}
+    return {"seconds": seconds, "max_final_joint_deviation_rad": deviation, "env_reset_seconds": env_reset_seconds}
+
+
+def _minimal_env_step(action: np.ndarray, joint_states: tuple, tcp_link: tuple, object_pose: tuple,
+                      contacts: tuple) -> tuple:
+    """The least a gymnasium environment of these tasks computes per step, in Python, from the
+    four queries' results (:func:`replay_bare`'s ``minimal_env``): the step's return value."""
+    values = [1.0 if value > 1.0 else (-1.0 if value < -1.0 else value) for value in action.tolist()]
+    tcp_position, object_position = tcp_link[4], object_pose[0]
+    distance = math.dist(tcp_position, object_position)
+    observation = np.array([state[0] for state in joint_states] + [state[1] for state in joint_states]
+                           + list(tcp_position) + list(object_position), dtype=np.float32)
+    reward = -distance - 0.001 * sum(value * value for value in values)
+    success = distance < 0.02
+    return observation, reward, success, False, {"is_success": success, "failure": "collision" if contacts else None}
 
 
 def replay_urdf_only(env, episodes: List[Dict[str, Any]]) -> Dict[str, float]:
@@ -315,6 +354,8 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0,
         physics_steps = sum(n for e in episodes for _, n in e["commands"])
         replay = replay_bare(env, episodes)
         floor = replay_bare(env, episodes, with_queries=True)
+        minimal = replay_bare(env, episodes, minimal_env=True)
+        minimal_with_reset_s = minimal["seconds"] + minimal["env_reset_seconds"]
         urdf = replay_urdf_only(env, episodes)
         urdf_s = urdf["seconds"]
         resting_s = resting_step_seconds(env, steps, first_seed)
@@ -337,6 +378,11 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0,
             "bare_urdf_only_untouched_episodes_same_motion": urdf["same_motion_share"],
             "bare_replay_with_queries_step_us": 1e6 * floor["seconds"] / steps,
             "overhead_floor_with_queries": floor["seconds"] / replay["seconds"],
+            "ratio_of_floor_to_bare_urdf_only": urdf_s / floor["seconds"],
+            "minimal_env_step_us": 1e6 * minimal["seconds"] / steps,
+            "ratio_of_minimal_env_to_bare_urdf_only": urdf_s / minimal["seconds"],
+            "env_reset_us": 1e6 * minimal["env_reset_seconds"] / len(episodes),
+            "ratio_of_minimal_env_with_this_reset_to_bare_urdf_only": urdf_s / minimal_with_reset_s,
             "resting_physics_substep_us": 1e6 * resting_s / (steps * substeps),
             "overhead_over_resting_scene": env_s / resting_s,
         })
@@ -364,7 +410,10 @@ def bench_env(env_id: str, steps: int, repeats: int, warmup: int, seed: int = 0,
             "steps_per_s", "real_time_factor", "env_step_us", "bare_replay_step_us", "bare_replay_steps_per_s",
             "overhead", "ratio_to_bare_world", "bare_urdf_only_step_us", "bare_urdf_only_steps_per_s",
             "ratio_to_bare_urdf_only", "bare_urdf_only_untouched_episodes_same_motion", "bare_replay_with_queries_step_us",
-            "overhead_floor_with_queries", "resting_physics_substep_us", "overhead_over_resting_scene")},
+            "overhead_floor_with_queries", "ratio_of_floor_to_bare_urdf_only", "minimal_env_step_us",
+            "ratio_of_minimal_env_to_bare_urdf_only", "env_reset_us",
+            "ratio_of_minimal_env_with_this_reset_to_bare_urdf_only", "resting_physics_substep_us",
+            "overhead_over_resting_scene")},
         "per_repeat": per_repeat,
         "targets": {
             "real_time_factor_min": TARGETS[env_id]["real_time_factor"],
@@ -464,7 +513,11 @@ def print_env_table(rows: List[Dict[str, Any]]) -> None:
         print(f"{r['env_id']} {r['variant']}: {r['env_step_us']:.0f}us per env step (resets included), the bare world "
               f"{r['bare_replay_step_us']:.0f}us ({r['substeps']} substeps plain), the bare world plus the four "
               f"state queries an env needs {r['bare_replay_with_queries_step_us']:.0f}us "
-              f"({r['overhead_floor_with_queries']:.2f}x, the floor for a Python env); the resting scene steps in "
+              f"({r['overhead_floor_with_queries']:.2f}x, the floor for a Python env; "
+              f"{r['ratio_of_floor_to_bare_urdf_only']:.2f} of the URDF alone's speed); a minimal Python env on "
+              f"that floor {r['minimal_env_step_us']:.0f}us ({r['ratio_of_minimal_env_to_bare_urdf_only']:.2f} of "
+              f"the URDF alone's speed; {r['ratio_of_minimal_env_with_this_reset_to_bare_urdf_only']:.2f} with this "
+              f"env's resets, {r['env_reset_us']:.0f}us each); the resting scene steps in "
               f"{r['resting_physics_substep_us']:.0f}us per substep; the URDF alone moved as the env's arm in "
               f"{100 * r['bare_urdf_only_untouched_episodes_same_motion']:.0f} % of the episodes where that touched "
               "nothing")
