@@ -175,8 +175,8 @@ def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False,
     resets as often as the env does. Returns the timed seconds and how far the replayed joints
     ended from the env's (rad), which shows the replay is the same motion.
 
-    ``with_queries`` adds, per control step, the four state queries any environment of this
-    task needs (joint states, tcp link state, object pose, the robot's contacts) and does
+    ``with_queries`` adds, at the end of every control period, the four state queries any
+    environment of this task needs (joint states, tcp link state, object pose, the robot's contacts) and does
     nothing with their results: the floor a Python environment on PyBullet can reach.
 
     ``minimal_env`` instead ends every control period with the least any gymnasium environment
@@ -217,13 +217,14 @@ def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False,
                 if settling:
                     change_dynamics(obj, -1, activationState=p.ACTIVATION_STATE_SLEEP, physicsClientId=client)
                     settling = False
+            if index != period_end:  # a command within the period (randomised timing)
+                continue
+            period_end = next(period_ends, -1)
             if minimal_env:
-                if index == period_end:
-                    period_end = next(period_ends, -1)
-                    _minimal_env_step(next(actions), get_joints(body, joints, physicsClientId=client),
-                                      get_link(body, tcp, computeForwardKinematics=1, physicsClientId=client),
-                                      get_pose(obj, physicsClientId=client), get_contacts(bodyA=body, physicsClientId=client))
-            elif with_queries and physics_steps:
+                _minimal_env_step(next(actions), get_joints(body, joints, physicsClientId=client),
+                                  get_link(body, tcp, computeForwardKinematics=1, physicsClientId=client),
+                                  get_pose(obj, physicsClientId=client), get_contacts(bodyA=body, physicsClientId=client))
+            elif with_queries:
                 get_joints(body, joints, physicsClientId=client)
                 get_link(body, tcp, computeForwardKinematics=1, physicsClientId=client)
                 get_pose(obj, physicsClientId=client)
