@@ -176,13 +176,14 @@ def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False,
     ended from the env's (rad), which shows the replay is the same motion.
 
     ``with_queries`` adds, at the end of every control period, the four state queries any
-    environment of this task needs (joint states, tcp link state, object pose, the robot's contacts) and does
-    nothing with their results: the floor a Python environment on PyBullet can reach.
+    environment of this task needs (joint states, tcp link state, object pose, the robot's
+    contacts) and does nothing with their results: the floor a Python environment on PyBullet
+    can reach.
 
     ``minimal_env`` instead ends every control period with the least any gymnasium environment
     of these tasks does in Python: the action to clipped floats, the four queries, an
     observation array (joint angles and velocities, tcp and object positions), a distance reward
-    with an action penalty, a success test and an ``info`` dict, once per control period.
+    with an action penalty, a success test and an ``info`` dict.
     ``env_reset_seconds`` is the time of the env's own resets (run untimed before each episode to
     rebuild its start): added to a minimal env's time, it gives one that resets as this env does."""
     import pybullet as p
