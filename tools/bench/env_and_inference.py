@@ -180,8 +180,8 @@ def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False,
     contacts) and does nothing with their results: the floor a Python environment on PyBullet
     can reach.
 
-    ``minimal_env`` instead ends every control period with the least any gymnasium environment
-    of these tasks does in Python: the action to clipped floats, the four queries, an
+    ``minimal_env`` ends every control period with the least any gymnasium environment of
+    these tasks does in Python: the action to clipped floats, the four queries, an
     observation array (joint angles and velocities, tcp and object positions), a distance reward
     with an action penalty, a success test and an ``info`` dict.
     ``env_reset_seconds`` is the time of the env's own resets (run untimed before each episode to
@@ -221,15 +221,12 @@ def replay_bare(env, episodes: List[Dict[str, Any]], with_queries: bool = False,
             if index != period_end:  # a command within the period (randomised timing)
                 continue
             period_end = next(period_ends, -1)
-            if minimal_env:
-                _minimal_env_step(next(actions), get_joints(body, joints, physicsClientId=client),
-                                  get_link(body, tcp, computeForwardKinematics=1, physicsClientId=client),
-                                  get_pose(obj, physicsClientId=client), get_contacts(bodyA=body, physicsClientId=client))
-            elif with_queries:
-                get_joints(body, joints, physicsClientId=client)
-                get_link(body, tcp, computeForwardKinematics=1, physicsClientId=client)
-                get_pose(obj, physicsClientId=client)
-                get_contacts(bodyA=body, physicsClientId=client)
+            if with_queries or minimal_env:
+                results = (get_joints(body, joints, physicsClientId=client),
+                           get_link(body, tcp, computeForwardKinematics=1, physicsClientId=client),
+                           get_pose(obj, physicsClientId=client), get_contacts(bodyA=body, physicsClientId=client))
+                if minimal_env:
+                    _minimal_env_step(next(actions), *results)
         seconds += perf() - t0
         deviation = max(deviation, float(np.max(np.abs(env.joint_positions() - episode["final_joint_positions"]))))
     return {"seconds": seconds, "max_final_joint_deviation_rad": deviation, "env_reset_seconds": env_reset_seconds}
