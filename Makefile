@@ -5,6 +5,7 @@ SHELL := /bin/bash
 ENV := set +u; source env.sh; set -u;
 TASK ?= reach
 ALGO ?= ppo
+ROBOT ?= fr5
 EPISODES ?= 5
 
 .PHONY: setup demo test test-fast bench bench-grasp bench-vision bench-ray train meshes lint clean help
@@ -16,7 +17,8 @@ help:
 	@echo "make lint   - set up, then catkin_lint and ruff (config: ruff.toml)"
 	@echo "make bench  - set up, then run the benchmarks; figures printed and written to bench/results/"
 	@echo "make bench-ray - set up, then the Ray Tune bench (1 vs 2 nodes, ASHA vs full); BENCH_ARGS=--quick"
-	@echo "make train  - set up, then train (TASK=reach|grasp ALGO=ppo|sac|td3|tqc)"
+	@echo "make train  - set up, then train (TASK=reach|grasp ALGO=ppo|sac|td3|tqc ROBOT=fr3|fr5|fr10|fr16|fr20|fr30)"
+	@echo "make meshes - set up, then regenerate urdf/ and meshes/ for every arm from config/robots/ and config/gripper.yaml"
 	@echo "make setup  - only the set-up"
 
 setup:
@@ -66,7 +68,7 @@ bench-vision: setup
 	@$(ENV) python tools/bench/vision.py $(BENCH_ARGS)
 
 train: setup
-	@$(ENV) rosrun fr5_rl train.py --task $(TASK) --algo $(ALGO)
+	@$(ENV) rosrun fr5_rl train.py --task $(TASK) --algo $(ALGO) --robot $(ROBOT)
 
 meshes: setup
 	@$(ENV) python tools/generate_description.py

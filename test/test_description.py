@@ -1,13 +1,15 @@
-"""Tests of the robot description urdf/fr5.urdf (and its generator).
+"""Tests of the robot descriptions urdf/<robot>.urdf (and their generator).
 
-The reference numbers below are written out literally from the published FR5 facts
-(joint origins, limits, masses) so that the test is independent of config/robot.yaml and
-of the generator: if either drifts from the real robot, these tests fail.
+The reference numbers below are written out literally from the manufacturer's published numbers
+(FAIRINO_FAMILY.md: the DH tables, the datasheet's limits, speeds and weights, the manual's link
+masses, the DH sheets' zero-pose flange) so that the tests are independent of config/robots/ and
+of the generator: if either drifts from the real arms, these tests fail. The forward kinematics
+they compare against is the standard DH chain itself, not the URDF's joint origins.
 
-PyBullet does not resolve ``package://`` URIs. To load the URDF in PyBullet, write a copy
-of its text in which ``package://fr5_rl/`` is replaced by the package path + "/" (see
-``pybullet_urdf`` below) and load it with ``flags=p.URDF_USE_INERTIA_FROM_FILE`` (else
-PyBullet recomputes the inertias from the collision shapes' bounding boxes).
+PyBullet does not resolve ``package://`` URIs. To load a URDF in PyBullet, write a copy of its
+text in which ``package://fr5_rl/`` is replaced by the package path + "/" (see ``pybullet_urdf``
+below) and load it with ``flags=p.URDF_USE_INERTIA_FROM_FILE`` (else PyBullet recomputes the
+inertias from the collision shapes' bounding boxes).
 """
 from __future__ import annotations
 
@@ -22,15 +24,40 @@ from typing import Dict, List, Tuple
 import numpy as np
 import pybullet as p
 import pytest
-import yaml
 
 REPO = Path(__file__).resolve().parent.parent
-URDF = REPO / "urdf" / "fr5.urdf"
 GENERATOR = REPO / "tools" / "generate_description.py"
+ARM_LINKS = ["base_link", "shoulder_Link", "upperarm_Link", "forearm_Link", "wrist1_Link", "wrist2_Link",
+             "wrist3_Link"]
+ARM_JOINTS = ["j1", "j2", "j3", "j4", "j5", "j6"]
 
-# ----------------------------------------------------------------- FR5 reference (facts)
-# joint, parent, child, origin xyz (m), origin rpy (rad)
-FR5_JOINTS: List[Tuple[str, str, str, Tuple[float, ...], Tuple[float, ...]]] = [
+# ----------------------------------------------------------------- the family (published numbers)
+# d1, a2, a3, d4, d5, d6 (m): the DH tables 2.4-1 ... 2.4-6
+FAMILY_DH: Dict[str, Tuple[float, ...]] = {
+    "fr3": (0.140, -0.280, -0.240, 0.102, 0.102, 0.100),
+    "fr5": (0.152, -0.425, -0.395, 0.102, 0.102, 0.100),
+    "fr10": (0.180, -0.700, -0.586, 0.159, 0.114, 0.106),
+    "fr16": (0.180, -0.520, -0.400, 0.159, 0.114, 0.106),
+    "fr20": (0.215, -1.000, -0.716, 0.166, 0.138, 0.120),
+    "fr30": (0.215, -0.700, -0.536, 0.166, 0.138, 0.120),
+}
+DH_ALPHA = (math.pi / 2, 0.0, 0.0, math.pi / 2, -math.pi / 2, 0.0)
+# The flange face at q = 0 (m, base): the DH sheets (FR10's computed from its table there).
+ZERO_POSE_FLANGE = {"fr3": (-0.520, -0.202, 0.038), "fr5": (-0.820, -0.202, 0.050),
+                    "fr10": (-1.286, -0.265, 0.066), "fr16": (-0.920, -0.265, 0.066),
+                    "fr20": (-1.716, -0.286, 0.077), "fr30": (-1.236, -0.286, 0.077)}
+# link1..link6 (kg): the manual's tables; with the base they add up to the datasheet weight.
+LINK_MASSES = {"fr3": (2.24, 4.94, 2.29, 1.56, 1.56, 0.36), "fr5": (4.64, 10.08, 2.71, 1.56, 1.56, 0.36),
+               "fr10": (11.97, 19.59, 3.70, 1.69, 1.69, 0.35), "fr16": (11.97, 18.18, 3.22, 1.69, 1.69, 0.35),
+               "fr20": (20.79, 42.84, 9.88, 4.64, 4.64, 0.60), "fr30": (20.64, 36.37, 8.41, 4.64, 4.64, 0.60)}
+WEIGHT = {"fr3": 15.0, "fr5": 22.0, "fr10": 40.0, "fr16": 40.0, "fr20": 85.0, "fr30": 85.0}  # kg, datasheet
+# Soft limits (rad): j3 +-160 deg (FR3 +-150 deg), the rest as in every v6 URDF.
+J3_LIMIT = {"fr3": math.radians(150)}
+SLOW_JOINTS = {"fr10": 2, "fr16": 2, "fr20": 3, "fr30": 3}  # j1..jN at 120 deg/s, the rest 180 deg/s
+FAMILY = list(FAMILY_DH)
+
+# The legacy FR5 file (frcobot_ros fr5_robot.urdf, 2023): joint, parent, child, xyz, rpy
+LEGACY_JOINTS: List[Tuple[str, str, str, Tuple[float, ...], Tuple[float, ...]]] = [
     ("j1", "base_link", "shoulder_Link", (0, 0, 0), (0, 0, 0)),
     ("j2", "shoulder_Link", "upperarm_Link", (0, 0, 0.155), (1.570796, -1.570796, 0)),
     ("j3", "upperarm_Link", "forearm_Link", (0, 0.425, 0), (0, 0, -1.570796)),
@@ -38,24 +65,31 @@ FR5_JOINTS: List[Tuple[str, str, str, Tuple[float, ...], Tuple[float, ...]]] = [
     ("j5", "wrist1_Link", "wrist2_Link", (0, 0, 0.13), (1.570796, 0, -1.570796)),
     ("j6", "wrist2_Link", "wrist3_Link", (0, 0, 0.102), (-1.570796, 2.268928, 0)),
 ]
-# joint: lower (rad), upper (rad), max velocity (rad/s), max effort (N m)
-FR5_LIMITS: Dict[str, Tuple[float, float, float, float]] = {
-    "j1": (-3.0543, 3.0543, 3.15, 150.0),
-    "j2": (-4.6251, 1.4835, 3.15, 150.0),
-    "j3": (-2.8274, 2.8274, 3.15, 150.0),
-    "j4": (-4.6251, 1.4835, 3.2, 28.0),
-    "j5": (-3.0543, 3.0543, 3.2, 28.0),
-    "j6": (-3.0543, 3.0543, 3.2, 28.0),
-}
-FR5_MASSES: Dict[str, float] = {  # kg
-    "base_link": 1.62, "shoulder_Link": 4.38, "upperarm_Link": 14.46, "forearm_Link": 7.67,
-    "wrist1_Link": 1.63, "wrist2_Link": 1.58, "wrist3_Link": 0.53,
-}
-# PGI-140-80: 0-40 mm per finger; project values for the tcp and the finger drive.
+LEGACY_MASSES = (1.62, 4.38, 14.46, 7.67, 1.63, 1.58, 0.53)
+
+# PGI-140-80: 0-40 mm per finger; the tcp 0.17 m beyond the flange face (the legacy file: beyond
+# wrist3_Link, the wrist centre).
 FINGER_JOINTS = ("finger_left_joint", "finger_right_joint")
-FINGER_TRAVEL = 0.04       # m
-TCP_OFFSET = 0.17          # m along the flange z axis
-ARM_LINKS = list(FR5_MASSES)
+FINGER_TRAVEL = 0.04
+TCP_OFFSET = 0.17
+HOME = (0.0, -1.570796, 1.570796, -1.570796, -1.570796, 0.0)
+ROBOTS = FAMILY + ["fr5_legacy"]
+
+
+def limits(robot: str) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lower, upper (rad) and speed (rad/s) limits of ``robot`` from the published numbers."""
+    if robot == "fr5_legacy":
+        return (np.array([-3.0543, -4.6251, -2.8274, -4.6251, -3.0543, -3.0543]),
+                np.array([3.0543, 1.4835, 2.8274, 1.4835, 3.0543, 3.0543]), np.array([3.15] * 3 + [3.2] * 3))
+    j3 = J3_LIMIT.get(robot, math.radians(160))
+    slow = SLOW_JOINTS.get(robot, 0)
+    speeds = np.array([math.radians(120) if i < slow else math.radians(180) for i in range(6)])
+    return (np.array([-3.0543, -4.6251, -j3, -4.6251, -3.0543, -3.0543]),
+            np.array([3.0543, 1.4835, j3, 1.4835, 3.0543, 3.0543]), speeds)
+
+
+def urdf_file(robot: str) -> Path:
+    return REPO / "urdf" / f"{robot}.urdf"
 
 
 # ----------------------------------------------------------------- helpers
@@ -69,17 +103,25 @@ def rpy_matrix(r: float, pi: float, y: float) -> np.ndarray:
     return rz @ ry @ rx
 
 
-def reference_fk(q: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Flange (wrist3_Link) pose in base_link from the FR5 joint-origin table:
-    returns (4x4 flange pose, 4x4 tcp pose)."""
+def reference_fk(robot: str, q: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """(flange, tcp) 4x4 poses in base_link from the published chain: the standard DH table for
+    the family (frame 6 is the flange face), the legacy file's joint origins for fr5_legacy (its
+    wrist3_Link, the wrist centre, was taken as the flange)."""
     t = np.eye(4)
-    for (_, _, _, xyz, rpy), qi in zip(FR5_JOINTS, q):
-        origin = np.eye(4)
-        origin[:3, :3] = rpy_matrix(*rpy)
-        origin[:3, 3] = xyz
-        turn = np.eye(4)
-        turn[:3, :3] = rpy_matrix(0.0, 0.0, qi)   # every joint turns about its local z
-        t = t @ origin @ turn
+    if robot == "fr5_legacy":
+        for (_, _, _, xyz, rpy), qi in zip(LEGACY_JOINTS, q):
+            origin = np.eye(4)
+            origin[:3, :3] = rpy_matrix(*rpy)
+            origin[:3, 3] = xyz
+            turn = np.eye(4)
+            turn[:3, :3] = rpy_matrix(0.0, 0.0, qi)
+            t = t @ origin @ turn
+    else:
+        d1, a2, a3, d4, d5, d6 = FAMILY_DH[robot]
+        for theta, d, a, alpha in zip(q, (d1, 0, 0, d4, d5, d6), (0, a2, a3, 0, 0, 0), DH_ALPHA):
+            ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
+            t = t @ np.array([[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st],
+                              [0, sa, ca, d], [0, 0, 0, 1]])
     tcp = t.copy()
     tcp[:3, 3] = t[:3, 3] + TCP_OFFSET * t[:3, 2]
     return t, tcp
@@ -91,18 +133,8 @@ def rotation_angle(a: np.ndarray, b: np.ndarray) -> float:
     return math.acos(max(-1.0, min(1.0, c)))
 
 
-def pybullet_urdf(directory: Path) -> Path:
-    """The copy of urdf/fr5.urdf that the simulator loads (package:// URIs made absolute, the
-    massless world root left out), copied into ``directory``."""
-    from fr5_rl.sim.robot import urdf_for_pybullet
-
-    path = directory / "fr5_pybullet.urdf"
-    shutil.copyfile(urdf_for_pybullet(URDF), path)
-    return path
-
-
 class Robot:
-    """A PyBullet (DIRECT) instance of the description with name -> index maps."""
+    """A PyBullet (DIRECT) instance of a description with name -> index maps."""
 
     def __init__(self, urdf_path: Path, fixed: bool = True) -> None:
         self.cid = p.connect(p.DIRECT)
@@ -135,72 +167,89 @@ class Robot:
         p.disconnect(self.cid)
 
 
-@pytest.fixture(scope="module")
-def urdf_copy(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return pybullet_urdf(tmp_path_factory.mktemp("urdf"))
+@pytest.fixture(scope="module", params=ROBOTS)
+def arm(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory):
+    """(name, URDF root element, the simulator's copy of the URDF, a PyBullet instance)."""
+    from fr5_rl.sim.robot import urdf_for_pybullet
 
-
-@pytest.fixture(scope="module")
-def robot(urdf_copy: Path):
-    r = Robot(urdf_copy)
-    yield r
-    r.close()
-
-
-@pytest.fixture(scope="module")
-def xml_root() -> ET.Element:
-    return ET.parse(URDF).getroot()
+    name = request.param
+    copy = tmp_path_factory.mktemp(name) / f"{name}_pybullet.urdf"
+    shutil.copyfile(urdf_for_pybullet(name), copy)
+    robot = Robot(copy)
+    yield name, ET.parse(urdf_file(name)).getroot(), copy, robot
+    robot.close()
 
 
 def floats(text: str) -> List[float]:
     return [float(v) for v in text.split()]
 
 
+def flange_link(name: str) -> str:
+    return "wrist3_Link" if name == "fr5_legacy" else "flange"
+
+
 # ----------------------------------------------------------------- structure
-def test_check_urdf_accepts_it() -> None:
+@pytest.mark.parametrize("name", ROBOTS)
+def test_check_urdf_accepts_it(name: str) -> None:
     exe = shutil.which("check_urdf")
     assert exe, "check_urdf (liburdfdom-tools) is a test dependency and must be installed"
-    res = subprocess.run([exe, str(URDF)], capture_output=True, text=True)
+    res = subprocess.run([exe, str(urdf_file(name))], capture_output=True, text=True)
     assert res.returncode == 0, res.stdout + res.stderr
     assert "Successfully Parsed" in res.stdout
 
 
-def test_arm_joints_match_fr5(xml_root: ET.Element) -> None:
-    assert xml_root.get("name") == "fr5"
-    joints = {j.get("name"): j for j in xml_root.findall("joint")}
-    for name, parent, child, xyz, rpy in FR5_JOINTS:
-        j = joints[name]
+def test_arm_joints_are_the_published_chain_and_limits(arm) -> None:
+    name, root, _, _ = arm
+    assert root.get("name") == name
+    joints = {j.get("name"): j for j in root.findall("joint")}
+    lower, upper, speed = limits(name)
+    if name == "fr5_legacy":
+        table = [(xyz, rpy) for _, _, _, xyz, rpy in LEGACY_JOINTS]
+    else:  # the vendor's v6 layout of the DH table
+        d1, a2, a3, d4, d5, _ = FAMILY_DH[name]
+        h = math.pi / 2
+        table = [((0, 0, 0), (0, 0, 0)), ((0, 0, d1), (h, 0, 0)), ((a2, 0, 0), (0, 0, 0)),
+                 ((a3, 0, 0), (0, 0, 0)), ((0, 0, d4), (h, 0, 0)), ((0, 0, d5), (-h, 0, 0))]
+    for i, (joint, (xyz, rpy)) in enumerate(zip(ARM_JOINTS, table)):
+        j = joints[joint]
         assert j.get("type") == "revolute"
-        assert j.find("parent").get("link") == parent
-        assert j.find("child").get("link") == child
+        assert j.find("parent").get("link") == ARM_LINKS[i]
+        assert j.find("child").get("link") == ARM_LINKS[i + 1]
         assert np.allclose(floats(j.find("origin").get("xyz")), xyz, atol=1e-9)
-        assert np.allclose(floats(j.find("origin").get("rpy")), rpy, atol=1e-9)
+        assert np.allclose(floats(j.find("origin").get("rpy")), rpy, atol=1e-6)
         assert np.allclose(floats(j.find("axis").get("xyz")), (0, 0, 1))
         lim = j.find("limit")
-        lower, upper, vel, eff = FR5_LIMITS[name]
-        assert float(lim.get("lower")) == pytest.approx(lower, abs=1e-9)
-        assert float(lim.get("upper")) == pytest.approx(upper, abs=1e-9)
-        assert float(lim.get("velocity")) == pytest.approx(vel, abs=1e-9)
-        assert float(lim.get("effort")) == pytest.approx(eff, abs=1e-9)
+        assert float(lim.get("lower")) == pytest.approx(lower[i], abs=1e-4)
+        assert float(lim.get("upper")) == pytest.approx(upper[i], abs=1e-4)
+        assert float(lim.get("velocity")) == pytest.approx(speed[i], abs=1e-4)
+        assert float(lim.get("effort")) > 0
 
 
-def test_gripper_and_tcp_joints(xml_root: ET.Element) -> None:
-    joints = {j.get("name"): j for j in xml_root.findall("joint")}
+def test_gripper_and_tcp_joints(arm) -> None:
+    name, root, _, _ = arm
+    joints = {j.get("name"): j for j in root.findall("joint")}
+    flange = flange_link(name)
+    if name != "fr5_legacy":  # the flange face d6 beyond the wrist centre, as the vendor's tool joint
+        fj = joints["flange_joint"]
+        assert fj.get("type") == "fixed" and fj.find("parent").get("link") == "wrist3_Link"
+        assert fj.find("child").get("link") == "flange"
+        assert np.allclose(floats(fj.find("origin").get("xyz")), (0, 0, FAMILY_DH[name][5]), atol=1e-12)
+        assert np.allclose(floats(fj.find("origin").get("rpy")), (0, 0, 0), atol=1e-12)
     mount = joints["gripper_mount"]
     assert mount.get("type") == "fixed"
-    assert mount.find("parent").get("link") == "wrist3_Link"
+    assert mount.find("parent").get("link") == flange
     assert mount.find("child").get("link") == "gripper_base_link"
     mxyz = floats(mount.find("origin").get("xyz"))
     assert mxyz[0] == 0 and mxyz[1] == 0 and 0 <= mxyz[2] < TCP_OFFSET
     tcp = joints["tcp_joint"]
     assert tcp.get("type") == "fixed"
-    assert tcp.find("parent").get("link") == "wrist3_Link"
+    assert tcp.find("parent").get("link") == flange
     assert tcp.find("child").get("link") == "tcp"
     assert np.allclose(floats(tcp.find("origin").get("xyz")), (0, 0, TCP_OFFSET), atol=1e-12)
     assert np.allclose(floats(tcp.find("origin").get("rpy")), (0, 0, 0), atol=1e-12)
-    for name, child, axis in (("finger_left_joint", "finger_left_link", (0, 1, 0)),
-                              ("finger_right_joint", "finger_right_link", (0, -1, 0))):
-        j = joints[name]
+    for joint, child, axis in (("finger_left_joint", "finger_left_link", (0, 1, 0)),
+                               ("finger_right_joint", "finger_right_link", (0, -1, 0))):
+        j = joints[joint]
         assert j.get("type") == "prismatic"
         assert j.find("parent").get("link") == "gripper_base_link"
         assert j.find("child").get("link") == child
@@ -211,86 +260,85 @@ def test_gripper_and_tcp_joints(xml_root: ET.Element) -> None:
         assert float(lim.get("velocity")) > 0 and float(lim.get("effort")) > 0
 
 
-def test_geometry_is_primitives_and_meshes_exist(xml_root: ET.Element) -> None:
+def test_geometry_is_primitives_and_meshes_exist(arm) -> None:
+    name, root, _, _ = arm
     total = 0
-    for link in xml_root.findall("link"):
+    for link in root.findall("link"):
         for col in link.findall("collision"):
             kinds = [g.tag for g in col.find("geometry")]
             assert kinds and set(kinds) <= {"box", "cylinder", "sphere"}, (link.get("name"), kinds)
         assert len(link.findall("collision")) <= 4, link.get("name")
         for mesh in link.findall("visual/geometry/mesh"):
             uri = mesh.get("filename")
-            assert uri.startswith("package://fr5_rl/meshes/")
+            assert uri.startswith(f"package://fr5_rl/meshes/{name}/")
             path = REPO / uri[len("package://fr5_rl/"):]
             assert path.is_file(), uri
             total += path.stat().st_size
-    for name in ARM_LINKS + ["gripper_base_link", "finger_left_link", "finger_right_link"]:
-        link = xml_root.find(f"link[@name='{name}']")
-        assert link.findall("collision"), name
-        assert len(link.findall("visual")) == 2, name     # body + dark caps
+    for link_name in ARM_LINKS + ["gripper_base_link", "finger_left_link", "finger_right_link"]:
+        link = root.find(f"link[@name='{link_name}']")
+        assert link.findall("collision"), link_name
+        assert len(link.findall("visual")) == 2, link_name     # body + dark caps
     assert total < 2 * 1024 * 1024
-    for name in ("finger_left_link", "finger_right_link"):
-        contact = xml_root.find(f"link[@name='{name}']/contact")
+    for link_name in ("finger_left_link", "finger_right_link"):
+        contact = root.find(f"link[@name='{link_name}']/contact")
         assert float(contact.find("lateral_friction").get("value")) == 1.0
         assert float(contact.find("spinning_friction").get("value")) == 0.001
 
 
 # ----------------------------------------------------------------- PyBullet
-def test_pybullet_joints_and_masses(robot: Robot, urdf_copy: Path) -> None:
-    for name, _, child, _, _ in FR5_JOINTS:
-        info = p.getJointInfo(robot.body, robot.joint[name], physicsClientId=robot.cid)
-        lower, upper, vel, eff = FR5_LIMITS[name]
+def test_pybullet_joints_and_masses(arm) -> None:
+    name, _, copy, robot = arm
+    lower, upper, speed = limits(name)
+    for i, joint in enumerate(ARM_JOINTS):
+        info = p.getJointInfo(robot.body, robot.joint[joint], physicsClientId=robot.cid)
         assert info[2] == p.JOINT_REVOLUTE
-        assert info[12].decode() == child
-        assert (info[8], info[9]) == pytest.approx((lower, upper), abs=1e-9)
-        assert info[10] == pytest.approx(eff) and info[11] == pytest.approx(vel)
-    for name in FINGER_JOINTS:
-        info = p.getJointInfo(robot.body, robot.joint[name], physicsClientId=robot.cid)
+        assert info[12].decode() == ARM_LINKS[i + 1]
+        assert (info[8], info[9]) == pytest.approx((lower[i], upper[i]), abs=1e-4)
+        assert info[11] == pytest.approx(speed[i], abs=1e-4)
+    for joint in FINGER_JOINTS:
+        info = p.getJointInfo(robot.body, robot.joint[joint], physicsClientId=robot.cid)
         assert info[2] == p.JOINT_PRISMATIC
         assert (info[8], info[9]) == pytest.approx((0.0, FINGER_TRAVEL))
-    for link, mass in FR5_MASSES.items():
-        if link == "base_link":
-            continue   # a fixed base reports mass 0; checked on a free copy below
-        assert p.getDynamicsInfo(robot.body, robot.link[link],
-                                 physicsClientId=robot.cid)[0] == pytest.approx(mass)
-    for name in ("finger_left_link", "finger_right_link"):
-        dyn = p.getDynamicsInfo(robot.body, robot.link[name], physicsClientId=robot.cid)
+    masses = LEGACY_MASSES[1:] if name == "fr5_legacy" else LINK_MASSES[name]
+    for link, mass in zip(ARM_LINKS[1:], masses):
+        assert p.getDynamicsInfo(robot.body, robot.link[link], physicsClientId=robot.cid)[0] == pytest.approx(mass)
+    for link in ("finger_left_link", "finger_right_link"):
+        dyn = p.getDynamicsInfo(robot.body, robot.link[link], physicsClientId=robot.cid)
         assert dyn[1] == pytest.approx(1.0) and dyn[7] == pytest.approx(0.001)  # <contact>
-    free = Robot(urdf_copy, fixed=False)
+    free = Robot(copy, fixed=False)  # a fixed base reports mass 0
     try:
-        assert p.getDynamicsInfo(free.body, -1, physicsClientId=free.cid)[0] == \
-            pytest.approx(FR5_MASSES["base_link"])
+        base = p.getDynamicsInfo(free.body, -1, physicsClientId=free.cid)[0]
     finally:
         free.close()
+    if name == "fr5_legacy":
+        assert base == pytest.approx(LEGACY_MASSES[0])
+    else:  # the arm (gripper apart) weighs what the datasheet says
+        assert base + sum(masses) == pytest.approx(WEIGHT[name], abs=0.01)
 
 
-def test_the_root_is_massless_for_kdl_and_pybullet_loads_base_link_as_its_base(
-        xml_root: ET.Element, urdf_copy: Path) -> None:
+def test_the_root_is_massless_for_kdl_and_pybullet_loads_base_link_as_its_base(arm) -> None:
     """robot_state_publisher (KDL) warns at every launch about a root link with inertia: the
     root is a massless ``world`` fixed to base_link, as in the vendor's URDF. The simulator's
-    copy leaves it out, so its fixed base is base_link with the FR5's base mass."""
-    children = {j.find("child").get("link") for j in xml_root.findall("joint")}
-    roots = [link for link in xml_root.findall("link") if link.get("name") not in children]
-    assert [root.get("name") for root in roots] == ["world"]
+    copy leaves it out, so its fixed base is base_link with the arm's base mass."""
+    _, root, copy, robot = arm
+    children = {j.find("child").get("link") for j in root.findall("joint")}
+    roots = [link for link in root.findall("link") if link.get("name") not in children]
+    assert [r.get("name") for r in roots] == ["world"]
     assert roots[0].find("inertial") is None
-    world_joint = [j for j in xml_root.findall("joint") if j.find("parent").get("link") == "world"]
+    world_joint = [j for j in root.findall("joint") if j.find("parent").get("link") == "world"]
     assert len(world_joint) == 1 and world_joint[0].get("type") == "fixed"
     assert world_joint[0].find("child").get("link") == "base_link"
-    copy = ET.parse(urdf_copy).getroot()
-    assert {link.get("name") for link in copy.findall("link")} == \
-        {link.get("name") for link in xml_root.findall("link")} - {"world"}
-    robot = Robot(urdf_copy)
-    try:
-        assert p.getBodyInfo(robot.body, physicsClientId=robot.cid)[0].decode() == "base_link"
-    finally:
-        robot.close()
+    assert {link.get("name") for link in ET.parse(copy).getroot().findall("link")} == \
+        {link.get("name") for link in root.findall("link")} - {"world"}
+    assert p.getBodyInfo(robot.body, physicsClientId=robot.cid)[0].decode() == "base_link"
 
 
-def test_inertias_are_physical(xml_root: ET.Element) -> None:
+def test_inertias_are_physical(arm) -> None:
+    name, root, _, _ = arm
     seen = 0
-    for link in xml_root.findall("link"):
+    for link in root.findall("link"):
         inertial = link.find("inertial")
-        if link.get("name") in ("tcp", "world"):
+        if link.get("name") in ("tcp", "world", "flange"):
             continue
         assert inertial is not None, link.get("name")
         a = {k: float(v) for k, v in inertial.find("inertia").attrib.items()}
@@ -314,27 +362,49 @@ def test_inertias_are_physical(xml_root: ET.Element) -> None:
     assert seen == 10
 
 
-def test_forward_kinematics_matches_fr5_table(robot: Robot) -> None:
+def test_forward_kinematics_matches_the_published_chain(arm) -> None:
+    """The URDF (in PyBullet) and the package's own forward kinematics against the DH table, at
+    1,000 random poses within the limits and at zero."""
+    from fr5_rl.config import load_robot_spec
+    from fr5_rl.kinematics import ForwardKinematics
+
+    name, _, _, robot = arm
+    ours = ForwardKinematics(load_robot_spec(name))
+    lower, upper, _ = limits(name)
     rng = np.random.default_rng(20240601)
-    lower = np.array([FR5_LIMITS[j][0] for j, *_ in FR5_JOINTS])
-    upper = np.array([FR5_LIMITS[j][1] for j, *_ in FR5_JOINTS])
-    names = [j for j, *_ in FR5_JOINTS]
-    configs = [np.zeros(6)] + [rng.uniform(lower, upper) for _ in range(250)]
+    configs = [np.zeros(6)] + [rng.uniform(lower, upper) for _ in range(1000)]
     worst_pos, worst_rot = 0.0, 0.0
     for q in configs:
-        robot.set(dict(zip(names, q)))
-        flange_ref, tcp_ref = reference_fk(q)
-        for link, ref in (("wrist3_Link", flange_ref), ("tcp", tcp_ref)):
+        robot.set(dict(zip(ARM_JOINTS, q)))
+        flange_ref, tcp_ref = reference_fk(name, q)
+        for link, ref in ((flange_link(name), flange_ref), ("tcp", tcp_ref)):
             got = robot.pose(link)
             worst_pos = max(worst_pos, float(np.linalg.norm(got[:3, 3] - ref[:3, 3])))
-            worst_rot = max(worst_rot, rotation_angle(got[:3, :3], ref[:3, :3]))
-    assert worst_pos < 1e-3, f"position error {worst_pos:.2e} m"
-    assert worst_rot < 1e-3, f"orientation error {worst_rot:.2e} rad"
+            worst_rot = max(worst_rot, abs(float(np.dot(got[:3, 2], ref[:3, 2])) - 1.0))
+        position, rotation = ours.flange_pose(q)
+        worst_pos = max(worst_pos, float(np.linalg.norm(position - flange_ref[:3, 3])))
+        worst_pos = max(worst_pos, float(np.linalg.norm(ours.tcp_pose(q)[0] - tcp_ref[:3, 3])))
+        worst_rot = max(worst_rot, abs(float(np.dot(rotation[:, 2], flange_ref[:3, 2])) - 1.0))
+    assert worst_pos < 1e-6, f"position error {worst_pos:.2e} m"
+    assert worst_rot < 1e-9, f"approach axis error {worst_rot:.2e}"
 
 
-def test_zero_pose_is_stretched_along_minus_x() -> None:
-    flange, _ = reference_fk(np.zeros(6))
-    assert flange[:3, 3] == pytest.approx((-0.82, -0.13, 0.053), abs=1e-6)
+@pytest.mark.parametrize("name", FAMILY)
+def test_zero_pose_flange_is_the_published_one(name: str) -> None:
+    from fr5_rl.config import load_robot_spec
+    from fr5_rl.kinematics import ForwardKinematics
+
+    assert reference_fk(name, np.zeros(6))[0][:3, 3] == pytest.approx(ZERO_POSE_FLANGE[name], abs=1e-3)
+    position, _ = ForwardKinematics(load_robot_spec(name)).flange_pose(np.zeros(6))
+    assert position == pytest.approx(ZERO_POSE_FLANGE[name], abs=1e-3)
+
+
+def test_the_current_fr5s_tcp_is_where_the_legacy_files_is_not() -> None:
+    """At the home pose the legacy model's tcp stood 103 mm above the current FR5's and 28 mm
+    beside it (issue #50)."""
+    legacy, current = reference_fk("fr5_legacy", np.array(HOME))[1], reference_fk("fr5", np.array(HOME))[1]
+    assert current[:3, 3] == pytest.approx((-0.497, -0.102, 0.307), abs=1e-3)
+    assert legacy[:3, 3] - current[:3, 3] == pytest.approx((0.0, -0.028, 0.103), abs=1e-3)
 
 
 def _finger_boxes(robot: Robot, link: str) -> List[Tuple[np.ndarray, np.ndarray]]:
@@ -362,9 +432,9 @@ def _finger_boxes(robot: Robot, link: str) -> List[Tuple[np.ndarray, np.ndarray]
 
 
 @pytest.mark.parametrize("opening", [0.0, 0.005, 0.02, 0.031, FINGER_TRAVEL])
-def test_fingers_open_symmetrically(robot: Robot, opening: float) -> None:
-    home = yaml.safe_load((REPO / "config" / "robot.yaml").read_text())["home_joint_positions"]
-    robot.set(dict(zip([j for j, *_ in FR5_JOINTS], home)))
+def test_fingers_open_symmetrically(arm, opening: float) -> None:
+    _, _, _, robot = arm
+    robot.set(dict(zip(ARM_JOINTS, HOME)))
     robot.set({"finger_left_joint": opening, "finger_right_joint": opening})
     tcp = robot.pose("tcp")
     for link, sign in (("finger_left_link", 1.0), ("finger_right_link", -1.0)):
@@ -382,9 +452,9 @@ def test_fingers_open_symmetrically(robot: Robot, opening: float) -> None:
         assert any(b[0][2] < -0.01 and b[1][2] > 0.0 for b in boxes)
 
 
-def test_no_self_collision_at_home(robot: Robot) -> None:
-    home = yaml.safe_load((REPO / "config" / "robot.yaml").read_text())["home_joint_positions"]
-    robot.set(dict(zip([j for j, *_ in FR5_JOINTS], home)))
+def test_no_self_collision_at_home(arm) -> None:
+    _, _, _, robot = arm
+    robot.set(dict(zip(ARM_JOINTS, HOME)))
     robot.set({"finger_left_joint": 0.02, "finger_right_joint": 0.02})
     links = sorted(robot.link.values())
     hits = []
@@ -404,20 +474,33 @@ def test_generator_reproduces_committed_files(tmp_path: Path) -> None:
     res = subprocess.run([sys.executable, str(GENERATOR), "--out-dir", str(tmp_path)],
                          capture_output=True, text=True, cwd=str(tmp_path))
     assert res.returncode == 0, res.stderr
-    assert (tmp_path / "urdf" / "fr5.urdf").read_bytes() == URDF.read_bytes(), \
-        "urdf/fr5.urdf differs from the generator output: run tools/generate_description.py"
-    made = sorted(f.name for f in (tmp_path / "meshes").iterdir())
-    committed = sorted(f.name for f in (REPO / "meshes").glob("*.stl"))
+    assert sorted(f.name for f in (tmp_path / "urdf").iterdir()) == sorted(f.name for f in (REPO / "urdf").iterdir())
+    for urdf in (tmp_path / "urdf").iterdir():
+        assert urdf.read_bytes() == (REPO / "urdf" / urdf.name).read_bytes(), \
+            f"urdf/{urdf.name} differs from the generator output: run make meshes"
+    made = sorted(str(f.relative_to(tmp_path / "meshes")) for f in (tmp_path / "meshes").rglob("*.stl"))
+    committed = sorted(str(f.relative_to(REPO / "meshes")) for f in (REPO / "meshes").rglob("*.stl"))
     assert made == committed
     for name in made:
         assert (tmp_path / "meshes" / name).read_bytes() == (REPO / "meshes" / name).read_bytes(), name
 
 
+@pytest.mark.parametrize("name", ROBOTS)
+def test_every_arm_has_a_description_and_the_home_pose_is_the_configs(name: str) -> None:
+    from fr5_rl.config import load_robot_spec, robot_names
+
+    assert sorted(robot_names()) == sorted(ROBOTS)
+    spec = load_robot_spec(name)
+    assert spec.home_joint_positions == pytest.approx(HOME)
+    assert spec.tcp_offset == pytest.approx(TCP_OFFSET)
+
+
 def test_view_robot_starts_at_home() -> None:
-    """launch/view_robot.launch's joint_state_publisher zeros are robot.yaml's home."""
-    cfg = yaml.safe_load((REPO / "config" / "robot.yaml").read_text())
+    """launch/view_robot.launch's joint_state_publisher zeros are the home pose."""
+    import yaml
+
     zeros = yaml.safe_load((REPO / "config" / "view_robot.yaml").read_text())["zeros"]
-    for name, q in zip(cfg["arm"]["joint_names"], cfg["home_joint_positions"]):
-        assert zeros[name] == pytest.approx(q, abs=1e-9), name
-    for name in FINGER_JOINTS:
-        assert 0.0 <= zeros[name] <= FINGER_TRAVEL
+    for joint, q in zip(ARM_JOINTS, HOME):
+        assert zeros[joint] == pytest.approx(q, abs=1e-9), joint
+    for joint in FINGER_JOINTS:
+        assert 0.0 <= zeros[joint] <= FINGER_TRAVEL

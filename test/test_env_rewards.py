@@ -66,6 +66,14 @@ def test_sparse_reward_pays_only_success_and_failures(task):
             check(reward, info)
             if terminated or truncated:
                 env.reset()
+        # Then down into the table (j2 and j3 forward, as a reach lowers the arm), until it ends.
+        down = np.array([0.0, 1.0, 0.5, 0.0, 0.0, 0.0, 0.0], dtype=np.float32)
+        for _ in range(env.cfg.task(task).max_steps):
+            _, reward, terminated, truncated, info = env.step(down)
+            check(reward, info)
+            if terminated or truncated:
+                break
+        env.reset()
         if task == "reach":
             assert run_expert(env, 0, on_step=check)["is_success"]
             assert bonus in seen

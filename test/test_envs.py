@@ -32,9 +32,10 @@ ENV_IDS = ["FR5Reach-v0", "FR5Grasp-v0"]
 TASKS = ["reach", "grasp"]
 
 # FAIRINO FR5 joint limits (rad) and velocity limits (rad/s), j1..j6, from the published data.
-FR5_LOWER = np.array([-3.0543, -4.6251, -2.8274, -4.6251, -3.0543, -3.0543])
-FR5_UPPER = np.array([3.0543, 1.4835, 2.8274, 1.4835, 3.0543, 3.0543])
-FR5_VELOCITY = np.array([3.15, 3.15, 3.15, 3.2, 3.2, 3.2])
+# The current FR5's datasheet: j3's soft limit +-160 deg, 180 deg/s on every axis.
+FR5_LOWER = np.array([-3.0543, -4.6251, -2.7925, -4.6251, -3.0543, -3.0543])
+FR5_UPPER = np.array([3.0543, 1.4835, 2.7925, 1.4835, 3.0543, 3.0543])
+FR5_VELOCITY = np.full(6, 3.1416)
 CONTROL_DT = 0.02
 FAR_CORNER = [-0.36, 0.29]  # object placement well away from the arm's path to the table
 
@@ -645,7 +646,7 @@ def test_bad_config_through_gym_make():
 
 def test_max_joint_step_over_velocity_limit_refused():
     allowed = float(FR5_VELOCITY.min()) * CONTROL_DT  # 0.063 rad per step
-    with pytest.raises(ConfigError, match="velocity limit"):
+    with pytest.raises(ConfigError, match="slowest rated joint speed"):
         FR5Env(task="reach", config={"action": {"max_joint_step": allowed * 1.05}})
     with pytest.raises(ConfigError):
         FR5Env(task="reach", config={"action": {"max_joint_step": -0.01}})

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fr5_rl.config import ConfigError, load_robot_spec, load_yaml, typed
-from fr5_rl.ros.calibration_motion import CalibrationMove, calibration_poses
+from fr5_rl.ros.calibration_motion import CalibrationMove, calibration_poses, centre_configuration
 from fr5_rl.deploy.deployment import SafetyZone
 from fr5_rl.motion_guard import MotionGuardSettings
 from fr5_rl.env_config import load_env_config
@@ -129,7 +129,7 @@ def test_the_generated_poses_are_safe_reachable_and_varied():
 
 def test_the_move_is_slow_synchronised_and_gated():
     move = CalibrationMove(ROBOT, ENV, GUARD, 0.25, 0.002, 0.005, 0.02)
-    start = np.array(SETTINGS.centre)
+    start = centre_configuration(SETTINGS, ROBOT)
     target = start + [0.2, -0.1, 0.1, 0.2, -0.2, 0.5]
     move.start(target)
     q, now = start.copy(), 0.0
@@ -144,7 +144,7 @@ def test_the_move_is_slow_synchronised_and_gated():
     # A target that takes the tcp below the table: the move stops at the safety gate, and no
     # command it sent left the safety zone.
     zone = SafetyZone(ROBOT, ENV)
-    move.start(np.array(SETTINGS.centre) + [0.0, 0.15, 0.0, 0.0, 0.0, 0.0])
+    move.start(centre_configuration(SETTINGS, ROBOT) + [0.0, 0.15, 0.0, 0.0, 0.0, 0.0])
     why = None
     for _ in range(2000):
         command, why = move.step(q, np.zeros(6), now)
@@ -265,7 +265,7 @@ def test_cli_refuses_a_bag_without_the_camera_topics(tmp_path, capsys):
     bag_path = tmp_path / "joints_only.bag"
     with rosbag.Bag(str(bag_path), "w") as bag:
         for k in range(10):
-            message = JointState(name=list(ROBOT.joint_names), position=list(SETTINGS.centre))
+            message = JointState(name=list(ROBOT.joint_names), position=list(centre_configuration(SETTINGS, ROBOT)))
             message.header.stamp = rospy.Time(1.0 + 0.01 * k)
             bag.write(SETTINGS.joint_states_topic, message, message.header.stamp)
     assert calibrate_main(["--out", str(tmp_path / "out.yaml"), "--bag", str(bag_path)]) == 2

@@ -8,11 +8,10 @@ repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # Runnable on its own too: enter the environment that tools/setup.sh made.
 set +u; source "$repo/env.sh"; set -u
 model="${MODEL:-models/reach}"
-task="$(python -c "import json,sys; print(json.load(open(sys.argv[1]))['task'])" "$repo/$model/meta.json")"
 if [ -n "${DISPLAY:-}" ] && [ -z "${CI:-}" ]; then
   echo "[demo] rviz on $DISPLAY; Ctrl-C to stop"
-  exec roslaunch fr5_rl sim_policy.launch model:="$model" task:="$task"
+  exec roslaunch fr5_rl sim_policy.launch model:="$model"
 fi
 echo "[demo] no display: running $episodes episodes headless with $model"
-roslaunch fr5_rl sim_policy.launch rviz:=false episodes:="$episodes" model:="$model" task:="$task" 2>&1 \
+roslaunch fr5_rl sim_policy.launch rviz:=false episodes:="$episodes" model:="$model" 2>&1 \
   | grep --line-buffered -E "episode [0-9]+:|success rate:|policy_node: (reach|grasp) model|FATAL|ERROR|Traceback"

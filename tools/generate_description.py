@@ -1,13 +1,15 @@
 #!/usr/bin/env python3
-"""Generate the FR5 + PGI-140-80 robot description from config/robot.yaml.
+"""Generate the description of every FAIRINO arm with its PGI-140-80 gripper from config/.
 
-Writes ``urdf/fr5.urdf`` (plain URDF, robot name ``fr5``) and the visual meshes
-``meshes/<link>_white.stl`` / ``meshes/<link>_dark.stl`` (binary STL, metres, each in its
-own link frame). Everything is derived from the kinematics and masses in
-config/robot.yaml, so the script is the single source of the description:
+Writes ``urdf/<robot>.urdf`` (plain URDF, robot name ``<robot>``) and the visual meshes
+``meshes/<robot>/<link>_white.stl`` / ``_dark.stl`` (binary STL, metres, each in its own link
+frame) for each ``config/robots/<robot>.yaml``. Everything is derived from the kinematics and
+masses there and in config/gripper.yaml (read through fr5_rl.config, as every other part of the
+package reads them), so the script is the single source of the description:
 
-    python tools/generate_description.py               # rewrite the committed files
-    python tools/generate_description.py --out-dir D   # write D/urdf/fr5.urdf, D/meshes/*
+    python tools/generate_description.py                 # rewrite the committed files (make meshes)
+    python tools/generate_description.py --robot fr10    # one arm
+    python tools/generate_description.py --out-dir D     # write D/urdf/*.urdf, D/meshes/*/*
 
 The output is deterministic (same input -> byte-identical files); test/test_description.py
 regenerates into a temporary directory and compares byte for byte.
@@ -16,33 +18,36 @@ Frames (all metres / radians, URDF conventions):
   * base_link: z up; at all joints zero the arm lies stretched along base -x.
   * upperarm_Link, forearm_Link, wrist1_Link: their z axis is the (parallel) j2/j3/j4
     axis; below, "lateral s" means a coordinate along that axis.
-  * wrist3_Link is the kinematic flange frame (on the j5 axis, z = approach axis). The
-    physical mounting face of the drawn flange sits FLANGE_FACE m further along +z, where
-    gripper_base_link starts; ``tcp`` is gripper.tcp_offset along the flange z axis.
+  * wrist3_Link is the wrist centre (z = the j6 axis, the approach axis). The family's arms have
+    a ``flange`` link at the flange face, d6 further along j6 (the vendor's v6 ``tool_Link``),
+    where gripper_base_link starts. The legacy FR5 file has none: its gripper is drawn
+    gripper_mount_offset beyond wrist3_Link. ``tcp`` lies on the same axis.
   * Finger links: origin on the inner pad face; joint value = that finger's travel (m)
     from the closed centre, so the opening width is q_left + q_right.
 
 Collision geometry uses only URDF primitives (cylinder / box), a few per link. Inertias
 are the mass properties of the union of each link's collision primitives (midpoint-rule
-quadrature on a regular grid) scaled to the link mass from robot.yaml.
+quadrature on a regular grid) scaled to the link mass from the arm's file.
 """
 from __future__ import annotations
 
 import argparse
+import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import trimesh
-import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "src"))  # the one description: fr5_rl.config
+from fr5_rl.config import dh_joint_origins, robot_config, robot_names  # noqa: E402
 
 from description_parts import (JointSpec, LinkSpec, box, cyl, mass_properties, num, v_cyl, v_rbox,
                                v_tube, vec)
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-CONFIG_PATH = REPO_ROOT / "config" / "robot.yaml"
 MESH_URI = "package://fr5_rl/meshes/"
-ROBOT_NAME = "fr5"
 
 
 # --------------------------------------------------------------------------- look
@@ -51,7 +56,8 @@ DARK_RGBA = (0.20, 0.22, 0.25, 1.0)    # joint caps, flange, gripper housing, pa
 
 # --------------------------------------------------------------------------- sizes (m)
 # Chosen to look like the FR5 while keeping non-adjacent links clear of each other at the
-# home pose; the kinematic lengths themselves come from robot.yaml.
+# home pose; the kinematic lengths themselves come from config/robots/<model>.yaml. Every other
+# arm of the family draws them times its drawing_scale (ArmSizes).
 BASE_R, BASE_TOP, BASE_PLATE_R, BASE_PLATE_H = 0.085, 0.070, 0.095, 0.012
 SHOULDER_R = 0.070            # j1 column and the j2 boss on top of it
 UPPER_S = 0.135               # lateral offset of the upper-arm tube along the j2 axis
@@ -63,7 +69,6 @@ FORE_TUBE_R0, FORE_TUBE_R1 = 0.046, 0.040            # tapered forearm tube (lat
 WRIST_R = 0.045               # wrist housings (j4, j5, j6)
 FORE_WRIST_S0, J4_SPLIT = -0.050, 0.040              # forearm/wrist1 split along the j4 axis
 CAP_T = 0.010                 # thickness of a dark joint cap
-FLANGE_FACE = 0.045           # mounting face of the drawn flange beyond the wrist3 origin
 WRIST3_S0 = 0.020             # wrist3 body starts here along the j6 axis
 WRIST2_J6_BACK = -0.057       # back end of the j6 housing (toward -z of the flange)
 # Gripper (DH-Robotics PGI-140-80 look-alike), in gripper_base_link (origin = mount face).
@@ -78,97 +83,172 @@ FINGER_FRICTION, FINGER_SPINNING_FRICTION = 1.0, 0.001
 
 
 # =========================================================================== the robot
-def _check_layout(origins: List[dict]) -> Tuple[float, float, float, float, float]:
-    """Return (d1, a2, a3, d4, d5) in metres from the joint origins and make sure they
-    have the FR5 layout the drawn shapes assume (each offset along one known axis)."""
-    expected_rpy = [(0, 0, 0), (1.5708, -1.5708, 0), (0, 0, -1.5708), (0, 0, 1.5708),
-                    (1.5708, 0, -1.5708), (-1.5708, 2.2689, 0)]
-    for o, rpy in zip(origins, expected_rpy):
-        if not np.allclose(o["rpy"], rpy, atol=1e-3):
-            raise ValueError(f"joint origin rpy {o['rpy']} is not the FR5 layout {rpy}")
+@dataclass(frozen=True)
+class ArmLayout:
+    """The lengths the drawn shapes need (m), from either chain the package describes.
+
+    :param elbow: the j3 origin in the upper arm's frame (along its y in the legacy file, along
+        its x in the family's).
+    :param flange_face: the flange face beyond the wrist centre along j6 (the family's d6; the
+        legacy file's drawn flange, which stood where its gripper was mounted).
+    """
+
+    d1: float
+    elbow: Tuple[float, float, float]
+    fore_length: float  # the j4 origin at -fore_length along the forearm's x
+    d4: float
+    d5: float
+    flange_face: float
+
+
+# rpy of each joint origin in the two chains: the family's (the vendor's v6 URDFs, from the DH
+# table) and the legacy FR5 file's.
+_FAMILY_RPY = [(0, 0, 0), (1.5708, 0, 0), (0, 0, 0), (0, 0, 0), (1.5708, 0, 0), (-1.5708, 0, 0)]
+_LEGACY_RPY = [(0, 0, 0), (1.5708, -1.5708, 0), (0, 0, -1.5708), (0, 0, 1.5708),
+               (1.5708, 0, -1.5708), (-1.5708, 2.2689, 0)]
+
+
+def arm_layout(origins: Sequence[dict], flange_face: float) -> ArmLayout:
+    """The drawn lengths from the joint origins, after checking that they have one of the two
+    layouts the shapes assume (each offset along one known axis)."""
+    rpys = [tuple(o["rpy"]) for o in origins]
+    if all(np.allclose(r, e, atol=1e-3) for r, e in zip(rpys, _FAMILY_RPY)):
+        pattern = [None, 2, 0, 0, 2, 2]   # index of the only non-zero offset component
+    elif all(np.allclose(r, e, atol=1e-3) for r, e in zip(rpys, _LEGACY_RPY)):
+        pattern = [None, 2, 1, 0, 2, 2]
+    else:
+        raise ValueError(f"joint origin rpys {rpys} are neither the FAIRINO family's nor the legacy FR5 file's")
     xyz = [np.array(o["xyz"], dtype=float) for o in origins]
-    pattern = [None, 2, 1, 0, 2, 2]   # index of the only non-zero offset component
     for i, (v, k) in enumerate(zip(xyz, pattern)):
         others = np.delete(v, k) if k is not None else v
         if not np.allclose(others, 0.0):
-            raise ValueError(f"joint {i + 1} origin {v} is not the FR5 layout")
-    return xyz[1][2], xyz[2][1], -xyz[3][0], xyz[4][2], xyz[5][2]
+            raise ValueError(f"joint {i + 1} origin {v} is not the layout its rpys say")
+    return ArmLayout(float(xyz[1][2]), tuple(float(v) for v in xyz[2]), float(-xyz[3][0]),
+                     float(xyz[4][2]), float(xyz[5][2]), float(flange_face))
+
+
+class ArmSizes:
+    """The arm's drawn sizes (the module's constants above) times ``scale``; the base's heights stay
+    the FR5's (a bigger arm's shoulder is not proportionally higher: d1 grows slower than its links)."""
+
+    NAMES = ("BASE_R", "BASE_TOP", "BASE_PLATE_R", "BASE_PLATE_H", "SHOULDER_R", "UPPER_S", "J2_HOUSING_R",
+             "J2_S0", "J2_S1", "ELBOW_R", "ELBOW_S0", "ELBOW_S1", "UPPER_TUBE_R0", "UPPER_TUBE_R1",
+             "FORE_ELBOW_R", "FORE_ELBOW_S0", "FORE_TUBE_R0", "FORE_TUBE_R1", "WRIST_R", "FORE_WRIST_S0",
+             "J4_SPLIT", "CAP_T", "WRIST3_S0", "WRIST2_J6_BACK")
+
+    UNSCALED = ("BASE_TOP", "BASE_PLATE_H")
+
+    def __init__(self, scale: float) -> None:
+        self.scale = scale
+        for name in self.NAMES:
+            setattr(self, name, globals()[name] * (1.0 if name in self.UNSCALED else scale))
+
+    def cap(self, radius: float) -> float:
+        """A dark cap's radius (m), drawn at the FR5's size, for this arm."""
+        return radius * self.scale
+
+
+def _tube_along(axis_end: Tuple[float, float, float]) -> Tuple[str, float]:
+    """The axis and the signed length of a link tube from the origin to ``axis_end`` (on one axis)."""
+    k = int(np.argmax(np.abs(axis_end)))
+    return "xyz"[k], float(axis_end[k])
 
 
 def build_robot(cfg: dict) -> Tuple[List[LinkSpec], List[JointSpec]]:
-    """All links (geometry in their own frames) and joints of the FR5 + gripper."""
-    arm, grip = cfg["arm"], cfg["gripper"]
+    """All links (geometry in their own frames) and joints of one arm + gripper.
+
+    :param cfg: :func:`fr5_rl.config.robot_config` of the arm (its gripper under ``gripper``).
+    """
+    arm, grip = cfg, cfg["gripper"]
     names, masses = arm["link_names"], arm["link_masses"]
-    d1, a2, a3, d4, d5 = _check_layout(arm["joint_origins"])
+    origins = dh_joint_origins(arm["dh"]) if "dh" in arm else arm["joint_origins"]
+    family = "dh" in arm
+    layout = arm_layout(origins, arm["dh"]["d6"] if family else arm["gripper_mount_offset"])
+    z = ArmSizes(float(arm["drawing_scale"]))
+    d1, d4, d5, a3, flange_face = layout.d1, layout.d4, layout.d5, layout.fore_length, layout.flange_face
+    upper_axis, a2 = _tube_along(layout.elbow)
     links: List[LinkSpec] = []
     L = {n: LinkSpec(n, float(m)) for n, m in zip(names, masses)}
     base, shoulder, upper, fore, w1, w2, w3 = (L[n] for n in names)
 
     # base_link (z up): mounting plate and a short pedestal under the j1 joint.
-    base.collisions = [cyl("z", 0.0, BASE_PLATE_H, BASE_PLATE_R), cyl("z", 0.0, BASE_TOP, BASE_R)]
-    base.dark = [v_cyl("z", 0.0, BASE_PLATE_H, BASE_PLATE_R, fillet=0.003)]
-    base.white = [v_cyl("z", BASE_PLATE_H - 0.002, BASE_TOP, BASE_R)]
+    base.collisions = [cyl("z", 0.0, z.BASE_PLATE_H, z.BASE_PLATE_R), cyl("z", 0.0, z.BASE_TOP, z.BASE_R)]
+    base.dark = [v_cyl("z", 0.0, z.BASE_PLATE_H, z.BASE_PLATE_R, fillet=0.003)]
+    base.white = [v_cyl("z", z.BASE_PLATE_H - 0.002, z.BASE_TOP, z.BASE_R)]
 
     # shoulder_Link (z up, turns with j1): column up to the j2 axis, rounded off by a
     # boss along the j2 axis (shoulder -y = lateral +s, toward the upper arm).
     s_top = (0.0, 0.0, d1)
-    shoulder.collisions = [cyl("z", BASE_TOP, d1, SHOULDER_R),
-                           cyl("y", -(J2_S0 - 0.007), SHOULDER_R + CAP_T, SHOULDER_R, s_top)]
-    shoulder.white = [v_cyl("z", BASE_TOP + 0.008, d1, SHOULDER_R),
-                      v_cyl("y", -(J2_S0 - 0.007), SHOULDER_R, SHOULDER_R, s_top)]
-    shoulder.dark = [v_cyl("z", BASE_TOP, BASE_TOP + 0.008, SHOULDER_R + 0.002, fillet=0.001),
-                     v_cyl("y", SHOULDER_R - 0.002, SHOULDER_R + CAP_T, 0.055, s_top)]
+    shoulder.collisions = [cyl("z", z.BASE_TOP, d1, z.SHOULDER_R),
+                           cyl("y", -(z.J2_S0 - 0.007), z.SHOULDER_R + z.CAP_T, z.SHOULDER_R, s_top)]
+    shoulder.white = [v_cyl("z", z.BASE_TOP + 0.008, d1, z.SHOULDER_R),
+                      v_cyl("y", -(z.J2_S0 - 0.007), z.SHOULDER_R, z.SHOULDER_R, s_top)]
+    shoulder.dark = [v_cyl("z", z.BASE_TOP, z.BASE_TOP + 0.008, z.SHOULDER_R + 0.002, fillet=0.001),
+                     v_cyl("y", z.SHOULDER_R - 0.002, z.SHOULDER_R + z.CAP_T, z.cap(0.055), s_top)]
 
-    # upperarm_Link (z = j2 axis, lateral s; the tube runs along +y to the elbow).
-    elbow = (0.0, a2, 0.0)
-    tube_u = (0.0, 0.0, UPPER_S)
-    upper.collisions = [cyl("z", J2_S0, J2_S1 + CAP_T, J2_HOUSING_R),
-                        cyl("y", J2_HOUSING_R - 0.01, a2 - ELBOW_R + 0.01, UPPER_TUBE_R0, tube_u),
-                        cyl("z", ELBOW_S0, ELBOW_S1 + CAP_T, ELBOW_R, elbow)]
-    upper.white = [v_cyl("z", J2_S0, J2_S1, J2_HOUSING_R),
-                   v_tube("y", 0.0, a2, UPPER_TUBE_R0, UPPER_TUBE_R1, tube_u),
-                   v_cyl("z", ELBOW_S0, ELBOW_S1, ELBOW_R, elbow)]
-    upper.dark = [v_cyl("z", J2_S1 - 0.002, J2_S1 + CAP_T, 0.058),
-                  v_cyl("z", ELBOW_S1 - 0.002, ELBOW_S1 + CAP_T, 0.050, elbow)]
+    # upperarm_Link (z = j2 axis, lateral s; the tube runs to the elbow along the upper arm's
+    # y (legacy file) or -x (the family's chain)).
+    elbow = layout.elbow
+    tube_u = (0.0, 0.0, z.UPPER_S)
+    sign = 1.0 if a2 > 0 else -1.0
+    tube_lo, tube_hi = sorted((sign * (z.J2_HOUSING_R - 0.01), a2 - sign * (z.ELBOW_R - 0.01)))
+    upper.collisions = [cyl("z", z.J2_S0, z.J2_S1 + z.CAP_T, z.J2_HOUSING_R),
+                        cyl(upper_axis, tube_lo, tube_hi, z.UPPER_TUBE_R0, tube_u),
+                        cyl("z", z.ELBOW_S0, z.ELBOW_S1 + z.CAP_T, z.ELBOW_R, elbow)]
+    upper.white = [v_cyl("z", z.J2_S0, z.J2_S1, z.J2_HOUSING_R),
+                   v_tube(upper_axis, 0.0, a2, z.UPPER_TUBE_R0, z.UPPER_TUBE_R1, tube_u) if a2 > 0 else
+                   v_tube(upper_axis, a2, 0.0, z.UPPER_TUBE_R1, z.UPPER_TUBE_R0, tube_u),
+                   v_cyl("z", z.ELBOW_S0, z.ELBOW_S1, z.ELBOW_R, elbow)]
+    upper.dark = [v_cyl("z", z.J2_S1 - 0.002, z.J2_S1 + z.CAP_T, z.cap(0.058)),
+                  v_cyl("z", z.ELBOW_S1 - 0.002, z.ELBOW_S1 + z.CAP_T, z.cap(0.050), elbow)]
 
     # forearm_Link (z = j3 axis; the tube runs along -x to the j4 axis at lateral s = 0).
     wrist = (-a3, 0.0, 0.0)
-    fore.collisions = [cyl("z", FORE_ELBOW_S0 - CAP_T, ELBOW_S0, FORE_ELBOW_R),
-                       cyl("x", -a3 + WRIST_R - 0.005, -FORE_ELBOW_R + 0.005, FORE_TUBE_R0),
-                       cyl("z", FORE_WRIST_S0 - CAP_T, J4_SPLIT, WRIST_R, wrist)]
-    fore.white = [v_cyl("z", FORE_ELBOW_S0, ELBOW_S0, FORE_ELBOW_R),
-                  v_tube("x", -a3, 0.0, FORE_TUBE_R1, FORE_TUBE_R0),
-                  v_cyl("z", FORE_WRIST_S0, J4_SPLIT, WRIST_R, wrist)]
-    fore.dark = [v_cyl("z", FORE_ELBOW_S0 - CAP_T, FORE_ELBOW_S0 + 0.002, 0.048),
-                 v_cyl("z", FORE_WRIST_S0 - CAP_T, FORE_WRIST_S0 + 0.002, 0.038, wrist)]
+    fore.collisions = [cyl("z", z.FORE_ELBOW_S0 - z.CAP_T, z.ELBOW_S0, z.FORE_ELBOW_R),
+                       cyl("x", -a3 + z.WRIST_R - 0.005, -z.FORE_ELBOW_R + 0.005, z.FORE_TUBE_R0),
+                       cyl("z", z.FORE_WRIST_S0 - z.CAP_T, z.J4_SPLIT, z.WRIST_R, wrist)]
+    fore.white = [v_cyl("z", z.FORE_ELBOW_S0, z.ELBOW_S0, z.FORE_ELBOW_R),
+                  v_tube("x", -a3, 0.0, z.FORE_TUBE_R1, z.FORE_TUBE_R0),
+                  v_cyl("z", z.FORE_WRIST_S0, z.J4_SPLIT, z.WRIST_R, wrist)]
+    fore.dark = [v_cyl("z", z.FORE_ELBOW_S0 - z.CAP_T, z.FORE_ELBOW_S0 + 0.002, z.cap(0.048)),
+                 v_cyl("z", z.FORE_WRIST_S0 - z.CAP_T, z.FORE_WRIST_S0 + 0.002, z.cap(0.038), wrist)]
 
     # wrist1_Link (z = j4 axis): the j4 housing, reaching past the j5 axis (at z = d4,
     # pointing along wrist1 -x); a dark cover on the far end and on the back of j5.
     j5 = (0.0, 0.0, d4)
-    w1.collisions = [cyl("z", J4_SPLIT, d4 + WRIST_R + CAP_T - 0.002, WRIST_R)]
-    w1.white = [v_cyl("z", J4_SPLIT + 0.008, d4 + WRIST_R, WRIST_R)]
-    w1.dark = [v_cyl("z", J4_SPLIT, J4_SPLIT + 0.008, WRIST_R + 0.001, fillet=0.001),
-               v_cyl("z", d4 + WRIST_R - 0.002, d4 + WRIST_R + CAP_T - 0.002, 0.038),
-               v_cyl("x", WRIST_R - 0.012, WRIST_R + 0.004, 0.034, j5)]
+    w1.collisions = [cyl("z", z.J4_SPLIT, d4 + z.WRIST_R + z.CAP_T - 0.002, z.WRIST_R)]
+    w1.white = [v_cyl("z", z.J4_SPLIT + 0.008, d4 + z.WRIST_R, z.WRIST_R)]
+    w1.dark = [v_cyl("z", z.J4_SPLIT, z.J4_SPLIT + 0.008, z.WRIST_R + 0.001, fillet=0.001),
+               v_cyl("z", d4 + z.WRIST_R - 0.002, d4 + z.WRIST_R + z.CAP_T - 0.002, z.cap(0.038)),
+               v_cyl("x", z.WRIST_R - 0.012, z.WRIST_R + 0.004, z.cap(0.034), j5)]
 
     # wrist2_Link (z = j5 axis; j6 axis along +y through z = d5): a stub out of the
     # wrist1 housing and the j6 housing, which stops short of the flange.
     j6 = (0.0, 0.0, d5)
-    w2.collisions = [cyl("z", WRIST_R, d5 - WRIST_R + 0.001, WRIST_R),
-                     cyl("y", WRIST2_J6_BACK - CAP_T, WRIST3_S0, WRIST_R, j6)]
-    w2.white = [v_cyl("z", WRIST_R + 0.007, d5 - WRIST_R + 0.001, WRIST_R, fillet=0.002),
-                v_cyl("y", WRIST2_J6_BACK, WRIST3_S0, WRIST_R, j6)]
-    w2.dark = [v_cyl("z", WRIST_R, WRIST_R + 0.008, WRIST_R + 0.001, fillet=0.001),
-               v_cyl("y", WRIST2_J6_BACK - CAP_T, WRIST2_J6_BACK + 0.002, 0.038, j6)]
+    w2.collisions = [cyl("z", z.WRIST_R, d5 - z.WRIST_R + 0.001, z.WRIST_R),
+                     cyl("y", z.WRIST2_J6_BACK - z.CAP_T, z.WRIST3_S0, z.WRIST_R, j6)]
+    w2.white = [v_cyl("z", z.WRIST_R + 0.007, d5 - z.WRIST_R + 0.001, z.WRIST_R, fillet=0.002),
+                v_cyl("y", z.WRIST2_J6_BACK, z.WRIST3_S0, z.WRIST_R, j6)]
+    w2.dark = [v_cyl("z", z.WRIST_R, z.WRIST_R + 0.008, z.WRIST_R + 0.001, fillet=0.001),
+               v_cyl("y", z.WRIST2_J6_BACK - z.CAP_T, z.WRIST2_J6_BACK + 0.002, z.cap(0.038), j6)]
 
-    # wrist3_Link (flange frame, z = j6 axis): rotating cover and the dark tool flange.
-    w3.collisions = [cyl("z", WRIST3_S0, FLANGE_FACE, WRIST_R)]
-    w3.white = [v_cyl("z", WRIST3_S0, FLANGE_FACE - 0.008, WRIST_R, fillet=0.002)]
-    w3.dark = [v_cyl("z", FLANGE_FACE - 0.009, FLANGE_FACE, 0.040, fillet=0.001)]
+    # wrist3_Link (the wrist centre, z = j6 axis): rotating cover and the dark tool flange,
+    # whose face is flange_face further along j6. The family's is longer (d6): a little slimmer,
+    # to clear the j4 housing at the home pose, and its collision stops short of the face, where
+    # the gripper (the flange frame's child, not wrist3's) begins.
+    w3_r, w3_end = (0.9 * z.WRIST_R, flange_face - 0.003) if family else (z.WRIST_R, flange_face)
+    w3.collisions = [cyl("z", z.WRIST3_S0, w3_end, w3_r)]
+    w3.white = [v_cyl("z", z.WRIST3_S0, flange_face - 0.008, w3_r, fillet=0.002)]
+    w3.dark = [v_cyl("z", flange_face - 0.009, flange_face, z.cap(0.040), fillet=0.001)]
     links += [base, shoulder, upper, fore, w1, w2, w3]
+    flange = str(arm["flange_frame"])
+    if family:  # a frame at the flange face, as the vendor's v6 tool_Link
+        links.append(LinkSpec(flange, 0.0))
+    mount_offset = float(arm["gripper_mount_offset"])
+    tcp_offset = float(arm.get("tcp_offset", mount_offset + float(grip["tcp_offset"])))
 
     # Gripper, in gripper_base_link: origin on the mounting face, z = approach axis.
-    tcp_z = float(grip["tcp_offset"]) - FLANGE_FACE      # tcp in the gripper frame
+    tcp_z = tcp_offset - mount_offset                     # tcp in the gripper frame
     pad_end = tcp_z + PAD_PAST_TCP
     finger_z = pad_end - FINGER_LEN                       # housing bottom = finger origin
     if finger_z - COUPLING_H < 0.03:
@@ -213,16 +293,17 @@ def build_robot(cfg: dict) -> Tuple[List[LinkSpec], List[JointSpec]]:
 
     joints: List[JointSpec] = []
     parent = names[0]
-    for i, (jn, o) in enumerate(zip(arm["joint_names"], arm["joint_origins"])):
+    for i, (jn, o) in enumerate(zip(arm["joint_names"], origins)):
         joints.append(JointSpec(jn, "revolute", parent, names[i + 1], o["xyz"], o["rpy"],
                                 (0.0, 0.0, 1.0),
                                 {"lower": arm["lower_limits"][i], "upper": arm["upper_limits"][i],
                                  "effort": arm["effort_limits"][i],
                                  "velocity": arm["velocity_limits"][i]}))
         parent = names[i + 1]
-    flange = str(grip["flange_frame"])
+    if family:
+        joints.append(JointSpec("flange_joint", "fixed", names[-1], flange, (0.0, 0.0, flange_face), (0.0, 0.0, 0.0)))
     joints.append(JointSpec("gripper_mount", "fixed", flange, "gripper_base_link",
-                            (0.0, 0.0, FLANGE_FACE), (0.0, 0.0, 0.0)))
+                            (0.0, 0.0, mount_offset), (0.0, 0.0, 0.0)))
     finger_limit = {"lower": 0.0, "upper": travel, "effort": float(grip["finger_effort"]),
                     "velocity": float(grip["finger_velocity"])}
     for jn, (f, sign) in zip(grip["joint_names"], fingers):
@@ -230,13 +311,13 @@ def build_robot(cfg: dict) -> Tuple[List[LinkSpec], List[JointSpec]]:
                                 (0.0, 0.0, finger_z), (0.0, 0.0, 0.0), (0.0, sign, 0.0),
                                 dict(finger_limit)))
     joints.append(JointSpec("tcp_joint", "fixed", flange, str(grip["tcp_frame"]),
-                            (0.0, 0.0, float(grip["tcp_offset"])), (0.0, 0.0, 0.0)))
+                            (0.0, 0.0, tcp_offset), (0.0, 0.0, 0.0)))
     return links, joints
 
 
 # =========================================================================== writers
-def link_xml(link: LinkSpec) -> List[str]:
-    """URDF text of one link: inertial, visuals (mesh per material), collisions."""
+def link_xml(link: LinkSpec, mesh_uri: str) -> List[str]:
+    """URDF text of one link: inertial, visuals (mesh per material, under ``mesh_uri``), collisions."""
     out = [f'  <link name="{link.name}">']
     if link.collisions:
         mp = mass_properties(link.collisions, link.mass)
@@ -258,7 +339,7 @@ def link_xml(link: LinkSpec) -> List[str]:
         if parts:
             out += ["    <visual>",
                     '      <origin xyz="0 0 0" rpy="0 0 0"/>',
-                    f'      <geometry><mesh filename="{MESH_URI}{link.name}_{material}.stl"/>'
+                    f'      <geometry><mesh filename="{mesh_uri}{link.name}_{material}.stl"/>'
                     "</geometry>",
                     f'      <material name="fr5_{material}"/>',
                     "    </visual>"]
@@ -300,21 +381,22 @@ ROOT_LINK_XML = [
 ]
 
 
-def urdf_text(links: Sequence[LinkSpec], joints: Sequence[JointSpec]) -> str:
-    """The complete URDF document."""
+def urdf_text(links: Sequence[LinkSpec], joints: Sequence[JointSpec], robot: str, title: str) -> str:
+    """The complete URDF document of arm ``robot`` (its meshes in ``meshes/<robot>/``)."""
     out = ['<?xml version="1.0"?>',
-           "<!-- FAIRINO FR5 with a DH-Robotics PGI-140-80 look-alike parallel gripper.",
-           "     GENERATED by tools/generate_description.py from config/robot.yaml: do not edit.",
+           f"<!-- {title} with a DH-Robotics PGI-140-80 look-alike parallel gripper.",
+           f"     GENERATED by tools/generate_description.py from config/robots/{robot}.yaml and",
+           "     config/gripper.yaml: do not edit.",
            "     Meshes are referenced as package://fr5_rl/...; PyBullet does not resolve",
            "     package:// URIs (replace 'package://fr5_rl/' by the package path first) and",
            "     needs flags=URDF_USE_INERTIA_FROM_FILE to use the inertias written here. -->",
-           f'<robot name="{ROBOT_NAME}">',
+           f'<robot name="{robot}">',
            f'  <material name="fr5_white"><color rgba="{vec(WHITE_RGBA)}"/></material>',
            f'  <material name="fr5_dark"><color rgba="{vec(DARK_RGBA)}"/></material>',
            *ROOT_LINK_XML]
     by_child = {j.child: j for j in joints}
     for link in links:
-        out += link_xml(link)
+        out += link_xml(link, f"{MESH_URI}{robot}/")
         if link.name in by_child:
             out += joint_xml(by_child[link.name])
     out.append("</robot>")
@@ -332,21 +414,22 @@ def mesh_files(links: Sequence[LinkSpec]) -> Dict[str, bytes]:
     return files
 
 
-def generate(out_dir: Path, config_path: Path = CONFIG_PATH) -> List[Path]:
-    """Write urdf/fr5.urdf and meshes/*.stl under ``out_dir``; return the paths written."""
-    with open(config_path, "r", encoding="utf-8") as fh:
-        cfg = yaml.safe_load(fh)
-    links, joints = build_robot(cfg)
-    (out_dir / "urdf").mkdir(parents=True, exist_ok=True)
-    (out_dir / "meshes").mkdir(parents=True, exist_ok=True)
+def generate(out_dir: Path, robots: Sequence[str]) -> List[Path]:
+    """Write ``urdf/<robot>.urdf`` and ``meshes/<robot>/*.stl`` under ``out_dir`` for each arm;
+    return the paths written."""
     written = []
-    urdf_path = out_dir / "urdf" / "fr5.urdf"
-    urdf_path.write_text(urdf_text(links, joints), encoding="utf-8")
-    written.append(urdf_path)
-    for name, data in sorted(mesh_files(links).items()):
-        path = out_dir / "meshes" / name
-        path.write_bytes(data)
-        written.append(path)
+    for robot in robots:
+        cfg = robot_config(robot)
+        links, joints = build_robot(cfg)
+        (out_dir / "urdf").mkdir(parents=True, exist_ok=True)
+        (out_dir / "meshes" / robot).mkdir(parents=True, exist_ok=True)
+        urdf_path = out_dir / "urdf" / f"{robot}.urdf"
+        urdf_path.write_text(urdf_text(links, joints, robot, str(cfg["title"])), encoding="utf-8")
+        written.append(urdf_path)
+        for name, data in sorted(mesh_files(links).items()):
+            path = out_dir / "meshes" / robot / name
+            path.write_bytes(data)
+            written.append(path)
     return written
 
 
@@ -355,9 +438,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out-dir", type=Path, default=REPO_ROOT,
                     help="root to write urdf/ and meshes/ under (default: the package)")
-    ap.add_argument("--config", type=Path, default=CONFIG_PATH, help="robot.yaml to read")
+    ap.add_argument("--robot", action="append", choices=robot_names(),
+                    help="an arm to generate (repeatable; default: every arm in config/robots/)")
     args = ap.parse_args(argv)
-    for path in generate(args.out_dir, args.config):
+    for path in generate(args.out_dir, args.robot or robot_names()):
         print(path)
     return 0
 

@@ -62,7 +62,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     environment = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(REPO / "src"),
                                                                              os.environ.get("PYTHONPATH")])))
     evaluation = subprocess.run([sys.executable, str(REPO / "scripts" / "evaluate.py"), str(args.target),
-                                 "--episodes", str(args.episodes)], env=environment)
+                                 "--episodes", str(args.episodes), "--out", str(args.target / "eval.json"),
+                                 "--force"], env=environment)
     if evaluation.returncode != 0:
         return "ship_model.py: evaluation failed"
 

@@ -93,13 +93,66 @@ def deep_update(base: Dict[str, Any], overrides: Optional[Mapping[str, Any]], st
     return merged
 
 
+DEFAULT_ROBOT = "fr5"
+
+
+def robot_names() -> List[str]:
+    """The arms this package describes: one ``config/robots/<name>.yaml`` each."""
+    return sorted(path.stem for path in (package_root() / "config" / "robots").glob("*.yaml"))
+
+
+def check_robot_name(robot: str) -> str:
+    """``robot`` if ``config/robots/<robot>.yaml`` exists, else a :class:`ConfigError` naming the known arms."""
+    names = robot_names()
+    if robot not in names:
+        raise ConfigError(f"unknown robot '{robot}': this fr5_rl describes {', '.join(names)} (config/robots/)")
+    return robot
+
+
+def urdf_path(robot: str) -> Path:
+    """``urdf/<robot>.urdf`` in the package: the arm's generated description (``make meshes``)."""
+    return package_root() / "urdf" / f"{check_robot_name(robot)}.urdf"
+
+
+def dh_joint_origins(dh: Mapping[str, float]) -> List[Dict[str, List[float]]]:
+    """The six URDF joint origins of a FAIRINO arm from its standard DH lengths (m).
+
+    The family's chain (alpha = pi/2, 0, 0, pi/2, -pi/2, 0; a = 0, a2, a3, 0, 0, 0; d = d1, 0, 0,
+    d4, d5, d6), laid out as the vendor's v6 URDFs lay it: every joint turns about its local z, and
+    the URDF's zero pose is the DH zero pose. The flange face lies a further ``d6`` along the j6 axis.
+    """
+    half_pi = math.pi / 2.0
+    return [
+        {"xyz": [0.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]},
+        {"xyz": [0.0, 0.0, float(dh["d1"])], "rpy": [half_pi, 0.0, 0.0]},
+        {"xyz": [float(dh["a2"]), 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]},
+        {"xyz": [float(dh["a3"]), 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]},
+        {"xyz": [0.0, 0.0, float(dh["d4"])], "rpy": [half_pi, 0.0, 0.0]},
+        {"xyz": [0.0, 0.0, float(dh["d5"])], "rpy": [-half_pi, 0.0, 0.0]},
+    ]
+
+
+def robot_config(robot: str = DEFAULT_ROBOT) -> Dict[str, Any]:
+    """The description of arm ``robot`` with its gripper, as plain data: ``config/robots/<robot>.yaml``
+    with ``config/gripper.yaml`` under ``gripper``. A model's ``meta.json`` keeps this as
+    ``robot_config``; the loader compares it with the current files.
+    """
+    data = load_yaml(config_path(f"robots/{check_robot_name(robot)}"))
+    if data.get("model") != robot:
+        raise ConfigError(f"config/robots/{robot}.yaml: 'model' must be '{robot}', got {data.get('model')!r}")
+    data["gripper"] = load_yaml("gripper")
+    return data
+
+
 @dataclass(frozen=True)
 class RobotSpec:
-    """The FR5 + gripper numbers every component uses (from ``config/robot.yaml``).
+    """The numbers of one FAIRINO arm + gripper that every component uses
+    (``config/robots/<model>.yaml`` and ``config/gripper.yaml``).
 
     Arrays are in controller joint order (``j1`` … ``j6``); radians, rad/s, metres.
     """
 
+    model: str  # config/robots/<model>.yaml
     joint_names: tuple
     finger_joint_names: tuple
     joint_origins_xyz: np.ndarray  # (6, 3) m, joint origin in the parent link frame
@@ -112,54 +165,75 @@ class RobotSpec:
     finger_travel: float  # m per finger; opening width = 2 * travel at most
     finger_velocity: float  # m/s per finger
     finger_effort: float  # N
-    tcp_offset: float  # m from the flange along flange z
+    flange_offset: float  # m from the last joint's frame (wrist3_Link) to flange_frame along its z
+    tcp_offset: float  # m from flange_frame to the tcp along flange z
     base_frame: str
     flange_frame: str
     tcp_frame: str
+    driver_flange_link: str  # the vendor driver's URDF link at our flange_frame (arm_tf:=driver)
 
     @property
     def max_opening_width(self) -> float:
         """Largest distance between the finger pads (m)."""
         return 2.0 * self.finger_travel
 
+    @property
+    def tcp_offset_from_wrist(self) -> float:
+        """m from the last joint's frame (the wrist centre) to the tcp along its z."""
+        return self.flange_offset + self.tcp_offset
 
-def load_robot_spec(path: str | Path = "robot") -> RobotSpec:
-    """Read ``config/robot.yaml`` into a :class:`RobotSpec`, checking array lengths."""
-    data = load_yaml(path)
-    arm, gripper = data["arm"], data["gripper"]
-    names = tuple(arm["joint_names"])
+
+def load_robot_spec(robot: str = DEFAULT_ROBOT) -> RobotSpec:
+    """Read ``config/robots/<robot>.yaml`` (and the gripper) into a :class:`RobotSpec`, checking
+    array lengths and limits.
+
+    :param robot: the arm's model name (``fr5``, ``fr10``, …; :func:`robot_names`).
+    """
+    data = robot_config(robot)
+    gripper = data["gripper"]
+    source = f"config/robots/{robot}.yaml"
+    names = tuple(data["joint_names"])
     n = len(names)
 
-    def vec(key: str, source: Mapping[str, Any] = arm) -> np.ndarray:
-        values = np.asarray(source[key], dtype=np.float64)
+    def vec(key: str) -> np.ndarray:
+        values = np.asarray(data[key], dtype=np.float64)
         if values.shape != (n,):
-            raise ConfigError(f"robot.yaml: '{key}' needs {n} values, got {values.shape}")
+            raise ConfigError(f"{source}: '{key}' needs {n} values, got {values.shape}")
         return values
 
+    if ("dh" in data) == ("joint_origins" in data):
+        raise ConfigError(f"{source}: give either 'dh' (the published DH lengths) or 'joint_origins', not both")
+    origins = dh_joint_origins(data["dh"]) if "dh" in data else data["joint_origins"]
     spec = RobotSpec(
+        model=robot,
         joint_names=names,
         finger_joint_names=tuple(gripper["joint_names"]),
-        joint_origins_xyz=np.array([o["xyz"] for o in arm["joint_origins"]], dtype=np.float64),
-        joint_origins_rpy=np.array([o["rpy"] for o in arm["joint_origins"]], dtype=np.float64),
+        joint_origins_xyz=np.array([o["xyz"] for o in origins], dtype=np.float64),
+        joint_origins_rpy=np.array([o["rpy"] for o in origins], dtype=np.float64),
         lower_limits=vec("lower_limits"),
         upper_limits=vec("upper_limits"),
         velocity_limits=vec("velocity_limits"),
         effort_limits=vec("effort_limits"),
-        home_joint_positions=vec("home_joint_positions", data),
+        home_joint_positions=vec("home_joint_positions"),
         finger_travel=float(gripper["finger_travel"]),
         finger_velocity=float(gripper["finger_velocity"]),
         finger_effort=float(gripper["finger_effort"]),
-        tcp_offset=float(gripper["tcp_offset"]),
+        flange_offset=float(data["dh"]["d6"]) if "dh" in data else 0.0,
+        # The legacy file measured its tcp from the wrist centre and says so with its own tcp_offset.
+        tcp_offset=float(data.get("tcp_offset", float(data["gripper_mount_offset"]) + float(gripper["tcp_offset"]))),
         base_frame=str(gripper["base_frame"]),
-        flange_frame=str(gripper["flange_frame"]),
+        flange_frame=str(data["flange_frame"]),
         tcp_frame=str(gripper["tcp_frame"]),
+        driver_flange_link=str(data["driver_flange_link"]),
     )
+    if spec.joint_origins_xyz.shape != (n, 3) or spec.joint_origins_rpy.shape != (n, 3):
+        raise ConfigError(f"{source}: the chain needs {n} joint origins")
     if np.any(spec.lower_limits >= spec.upper_limits):
-        raise ConfigError("robot.yaml: every lower limit must be below its upper limit")
+        raise ConfigError(f"{source}: every lower limit must be below its upper limit")
     if np.any(spec.home_joint_positions < spec.lower_limits) or np.any(
         spec.home_joint_positions > spec.upper_limits
     ):
-        raise ConfigError("robot.yaml: home_joint_positions lies outside the joint limits")
+        raise ConfigError(f"{source}: home_joint_positions lies outside the joint limits")
     return spec
 
 

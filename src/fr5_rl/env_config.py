@@ -15,7 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Union
 
-from .config import ConfigError, check_time_constants, deep_update, load_robot_spec, load_yaml, typed, whole_multiple
+from .config import (DEFAULT_ROBOT, ConfigError, check_time_constants, deep_update, load_robot_spec, load_yaml,
+                     robot_config, typed, whole_multiple)
 
 
 @dataclass(frozen=True)
@@ -271,6 +272,7 @@ class EnvConfig:
     model's ``meta.json``.
     """
 
+    robot: str  # config/robots/<robot>.yaml: the arm, and the cell sized to it
     simulation: SimulationConfig
     table: TableConfig
     object: ObjectConfig
@@ -329,21 +331,30 @@ class EnvConfig:
                 raise ConfigError(f"randomisation.{key}: [{low}, {high}] must satisfy 0 <= low <= high <= "
                                   f"control_dt ({control_dt} s): it is a time inside one control period")
         max_step = self.action.max_joint_step
-        allowed = min(load_robot_spec().velocity_limits) * control_dt
+        allowed = min(load_robot_spec(self.robot).velocity_limits) * control_dt
         if not 0.0 < max_step <= allowed + 1e-12:
             raise ConfigError(
                 f"action.max_joint_step = {max_step} rad per {control_dt} s step would exceed the "
-                f"FR5 velocity limit; use at most {allowed:.4f} rad (velocity limit x control_dt)")
+                f"{self.robot}'s slowest rated joint speed; use at most {allowed:.4f} rad (velocity limit x control_dt)")
         if not 0.0 < self.action.smoothing_alpha <= 1.0:
             raise ConfigError("action.smoothing_alpha must be in (0, 1]")
 
 
 def load_env_config(overrides: Optional[Mapping[str, Any]] = None, path: Union[str, Path] = "env") -> EnvConfig:
-    """Read ``config/env.yaml`` (or ``path``), merge ``overrides`` and check the result.
+    """Read ``config/env.yaml`` (or ``path``), size its cell to the arm, merge ``overrides`` and
+    check the result.
+
+    The arm is ``overrides["robot"]`` or env.yaml's ``robot``; its file's ``cell`` (table, placement
+    region, workspace, …, sized to its reach) replaces env.yaml's values before ``overrides`` do.
 
     :param overrides: a nested mapping of keys to replace (unknown keys are refused).
-    :raises ConfigError: an unknown key, a missing key, a wrong type or a value out of range;
-        the message names the key.
+    :raises ConfigError: an unknown key, a missing key, a wrong type or a value out of range, or an
+        unknown robot; the message names the key.
     """
-    merged = deep_update(load_yaml(path), overrides)
+    base = load_yaml(path)
+    robot = (overrides or {}).get("robot", base.get("robot", DEFAULT_ROBOT))
+    if not isinstance(robot, str):
+        raise ConfigError(f"env configuration: 'robot' must be an arm's name, got {robot!r}")
+    cell = robot_config(robot).get("cell", {})
+    merged = deep_update(deep_update(base, cell), overrides)
     return typed(EnvConfig, merged, "env configuration")

@@ -161,19 +161,26 @@ class FR5Env(gym.Env):
         config: overrides merged into ``config/env.yaml`` (unknown keys are refused), or an
             :class:`~fr5_rl.env_config.EnvConfig` already loaded.
         render_mode: None, "rgb_array" (headless TinyRenderer) or "human" (PyBullet GUI).
+        robot: the arm (``fr5``, ``fr10``, …: ``config/robots/``), the same as ``config={"robot": …}``;
+            None: the config's (``fr5`` by default).
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 50}
 
     def __init__(self, task: str = "reach", config: Union[EnvConfig, Mapping[str, Any], None] = None,
-                 render_mode: Optional[str] = None) -> None:
+                 render_mode: Optional[str] = None, robot: Optional[str] = None) -> None:
         super().__init__()
         if task not in TASKS:
             raise ValueError(f"unknown task '{task}'; choose one of {sorted(TASKS)}")
         if render_mode not in (None, "rgb_array", "human"):
             raise ValueError(f"render_mode must be None, 'rgb_array' or 'human', got {render_mode!r}")
-        self.cfg: EnvConfig = config if isinstance(config, EnvConfig) else load_env_config(config)
-        self.robot_spec = load_robot_spec()
+        if isinstance(config, EnvConfig):
+            if robot is not None and robot != config.robot:
+                raise ValueError(f"robot='{robot}' contradicts the configuration's robot '{config.robot}'")
+            self.cfg = config
+        else:
+            self.cfg = load_env_config({**(config or {}), **({"robot": robot} if robot is not None else {})})
+        self.robot_spec = load_robot_spec(self.cfg.robot)
         self.render_mode = render_mode
         self.control_dt = self.cfg.simulation.control_dt
         self.task: Task = TASKS[task](self.cfg, self.robot_spec.max_opening_width)

@@ -1,4 +1,4 @@
-"""Forward kinematics of the FR5 from its joint-origin table (``config/robot.yaml``).
+"""Forward kinematics of a FAIRINO arm from its joint-origin table (``config/robots/<model>.yaml``).
 
 The environments and the ROS policy node both compute the tcp pose with this code from
 measured joint angles, so the observation cannot differ between training and deployment.
@@ -42,7 +42,9 @@ class ForwardKinematics:
     def __init__(self, robot: RobotSpec) -> None:
         self._origin_rotations = [rotation_from_rpy(*rpy) for rpy in robot.joint_origins_rpy]
         self._origin_translations = [np.asarray(xyz, dtype=np.float64) for xyz in robot.joint_origins_xyz]
-        self._tcp_offset = float(robot.tcp_offset)
+        # The tcp from the last joint's frame (the wrist centre): the flange face, then the tool.
+        self._tcp_offset = float(robot.tcp_offset_from_wrist)
+        self._flange_offset = float(robot.flange_offset)
         # The same table as plain floats (rotation row-major, then translation): flange_pose runs
         # for every observation, where numpy's per-call cost on 3x3 matrices dominates.
         self._origins_flat = [tuple(float(v) for v in rotation.ravel()) + tuple(float(v) for v in translation)
@@ -78,9 +80,11 @@ class ForwardKinematics:
         return px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22
 
     def flange_pose(self, joint_positions: Sequence[float]) -> Tuple[np.ndarray, np.ndarray]:
-        """Return (position (3,), rotation (3, 3)) of the flange (``wrist3_Link``) in base_link."""
+        """Return (position (3,), rotation (3, 3)) of the flange frame (the spec's ``flange_frame``:
+        the flange face, ``flange_offset`` beyond the wrist centre along j6) in base_link."""
         px, py, pz, *rotation = self._chain(joint_positions)
-        return np.array((px, py, pz)), np.array(rotation).reshape(3, 3)
+        rotation = np.array(rotation).reshape(3, 3)
+        return np.array((px, py, pz)) + rotation[:, 2] * self._flange_offset, rotation
 
     def tcp_position_and_axis(self, joint_positions: Sequence[float]) -> Tuple[List[float], List[float]]:
         """The tcp's position (m) and approach axis (its z, unit) in base_link, as plain floats:
@@ -129,8 +133,8 @@ class ForwardKinematics:
         return [tx, ty, tz], rotation, [linear_x, linear_y, linear_z, angular_x, angular_y, angular_z]
 
     def joint_origins(self, joint_positions: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-        """Origins of the joint frames j1 … j6 (rows, m, base_link; j6's is the flange) and the
-        flange rotation: the points the arm's links run between."""
+        """Origins of the joint frames j1 … j6 (rows, m, base_link; j6's is the wrist centre) and
+        the flange rotation: the points the arm's links run between."""
         rotation = np.eye(3)
         position = np.zeros(3)
         origins = []
@@ -146,11 +150,12 @@ class ForwardKinematics:
     def tcp_pose(self, joint_positions: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """Return (position (3,), rotation (3, 3)) of the ``tcp`` frame in base_link.
 
-        The tcp sits ``tcp_offset`` metres along the flange z axis with the flange's
-        orientation, so its z axis is the gripper's approach direction.
+        The tcp sits ``tcp_offset`` metres along the flange z axis beyond the flange, with the
+        flange's orientation, so its z axis is the gripper's approach direction.
         """
-        position, rotation = self.flange_pose(joint_positions)
-        return position + rotation[:, 2] * self._tcp_offset, rotation
+        px, py, pz, *rotation = self._chain(joint_positions)
+        rotation = np.array(rotation).reshape(3, 3)
+        return np.array((px, py, pz)) + rotation[:, 2] * self._tcp_offset, rotation
 
 
 class InverseKinematics:

@@ -3,7 +3,8 @@
 
 Params: ~episodes (how many to watch), ~min_success_rate, ~command_topic, and optionally
 ~joint_states_topic with ~joint_names (the exact set of names every message must carry). Every
-command seen on the way must be a valid FR5 command (6 finite values inside the joint limits).
+command seen on the way must be a valid command (6 finite values inside the joint limits of the
+arm the launch describes: /robot_description names it).
 """
 import json
 import unittest
@@ -15,13 +16,14 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
 from fr5_rl.config import load_robot_spec
+from fr5_rl.ros.robot_description import robot_name
 
 
 class TestClosedLoop(unittest.TestCase):
     def test_success_rate(self):
         episodes = int(rospy.get_param("~episodes", 10))
         min_rate = float(rospy.get_param("~min_success_rate", 0.9))
-        spec = load_robot_spec()
+        spec = load_robot_spec(robot_name(rospy.get_param("/robot_description")))
         outcomes, bad_commands, commands = [], [], [0]
 
         def on_outcome(message):

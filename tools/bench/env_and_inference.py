@@ -265,7 +265,7 @@ def replay_urdf_only(env, episodes: List[Dict[str, Any]]) -> Dict[str, float]:
         p.setGravity(0.0, 0.0, sim.gravity, physicsClientId=client)
         p.setPhysicsEngineParameter(numSolverIterations=sim.solver_iterations, deterministicOverlappingPairs=1,
                                     physicsClientId=client)
-        body = p.loadURDF(urdf_for_pybullet(), basePosition=[0, 0, 0], useFixedBase=True,
+        body = p.loadURDF(urdf_for_pybullet(robot.spec.model), basePosition=[0, 0, 0], useFixedBase=True,
                           flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client)
         joints = robot.all_joints
         cap_joint_speeds(body, robot.spec, client)

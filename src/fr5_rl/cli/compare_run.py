@@ -21,7 +21,7 @@ import math
 from pathlib import Path
 from typing import List, Optional
 
-from ..config import ConfigError, load_robot_spec, load_yaml
+from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec, load_yaml, robot_names
 from ..deploy.bundle import write_json_atomic
 from ..sim.driver_profile import load_driver_profile, profile_summary
 from ..sim_to_real.compare import joint_table, plot_joints, run_report
@@ -44,6 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--command-topic", default=None,
                         help="default: /frrobot/joints_position_controller/command, else /fr5/arm_controller/command")
     parser.add_argument("--task", choices=["reach", "grasp"], default=None, help="the replay's scene (config's)")
+    parser.add_argument("--robot", choices=robot_names(), default=DEFAULT_ROBOT, help="the arm that made the run (fr5)")
     parser.add_argument("--force", action="store_true", help="replace an existing report in --out")
     return parser
 
@@ -57,14 +58,14 @@ def main(argv: Optional[List[str]] = None) -> int:
         settings = load_yaml("sim_to_real")
         task = args.task or settings["task"]
         profile = load_driver_profile(args.driver_profile or settings["base_profile"])
-        spec = load_robot_spec()
+        spec = load_robot_spec(args.robot)
         recording = read_recording(args.bag, spec.joint_names, args.joint_states_topic, args.command_topic)
-        result = replay_error(recording, profile, task)
+        result = replay_error(recording, profile, task, robot=args.robot)
         baseline = None
         baseline_replay = None
         if args.baseline_profile:
             base_profile = load_driver_profile(args.baseline_profile)
-            baseline_result = replay_error(recording, base_profile, task)
+            baseline_result = replay_error(recording, base_profile, task, robot=args.robot)
             baseline_replay = baseline_result.pop("replay")
             baseline = {"profile": profile_summary(base_profile), "source": str(args.baseline_profile),
                         "tracking_error": baseline_result, "rms_ratio": baseline_result["rms_rad"] / max(result["rms_rad"], 1e-12)}

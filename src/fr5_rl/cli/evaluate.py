@@ -15,8 +15,8 @@ import time
 from pathlib import Path
 from typing import Any, Dict, List, Optional
 
-from ..config import ConfigError
-from ..deploy.bundle import EVAL_FILE, ModelFilesError
+from ..config import ConfigError, robot_names
+from ..deploy.bundle import META_FILE, ModelFilesError
 from ..training.evaluation import HELD_OUT_SEED_START
 from . import fail, script_args
 
@@ -26,6 +26,8 @@ def build_parser() -> argparse.ArgumentParser:
                                      epilog=__doc__.split("\n\n", 1)[1])
     parser.add_argument("model_dir", type=Path, nargs="?", help="model directory (meta.json + the backend's files)")
     parser.add_argument("--expert", choices=["reach", "grasp"], help="evaluate the scripted expert on this task")
+    parser.add_argument("--robot", choices=robot_names(), default=None,
+                        help="the arm: the expert's (default fr5); a model trained for another arm refuses")
     parser.add_argument("--backend", choices=["torch", "onnx"], default="torch")
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--seed-start", type=int, default=HELD_OUT_SEED_START)
@@ -33,7 +35,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="JSON env overrides merged over the model's, e.g. '{\"randomisation\": {\"enabled\": true}}'")
     parser.add_argument("--training-env", action="store_true",
                         help="evaluate with the model's training overrides (e.g. its randomisation)")
-    parser.add_argument("--out", type=Path, default=None, help="summary JSON (default: MODEL_DIR/eval.json)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="summary JSON (default: eval_<MODEL_DIR's name>.json in the current directory)")
+    parser.add_argument("--force", action="store_true",
+                        help="write over a model directory's own eval.json (or a file there) if --out points at it")
     parser.add_argument("--csv", type=Path, default=None, help="per-episode CSV (default: beside the summary)")
     parser.add_argument("--gif", type=Path, default=None, help="record the first episode as a GIF")
     parser.add_argument("--no-map", action="store_true",
@@ -51,12 +56,26 @@ def main(argv: Optional[List[str]] = None) -> int:
     args = parser.parse_args(script_args(argv))
     if args.model_dir is None and args.expert is None and args.plot is None:
         parser.error("give a MODEL_DIR, --expert TASK or --plot RUN_DIR")
+    if args.model_dir is not None and args.expert is not None:
+        parser.error("give a MODEL_DIR or --expert TASK, not both: --expert evaluates the scripted expert, not a model")
     try:
         return evaluate(args)
     except (ConfigError, ModelFilesError) as error:
         return fail("evaluate.py", error)
     except json.JSONDecodeError as error:
         return fail("evaluate.py", f"--config is not valid JSON: {error}")
+
+
+def check_writable(out: Optional[Path], force: bool) -> None:
+    """Refuse, before any episode runs, an ``--out`` that would replace a file in a model
+    directory (a shipped model's eval.json, say) unless ``force``."""
+    if out is None or force:
+        return
+    target = Path(out).resolve()
+    if (target.parent / META_FILE).is_file() and any(target.with_suffix(suffix).exists()
+                                                     for suffix in (".json", ".csv", ".png")):
+        raise ConfigError(f"{out} would replace a result in the model directory {target.parent}: pass another --out, "
+                          "or --force to replace it")
 
 
 def evaluate(args: argparse.Namespace) -> int:
@@ -74,6 +93,8 @@ def evaluate(args: argparse.Namespace) -> int:
         from ..expert import ScriptedExpert
 
         task, label = args.expert, "scripted expert"
+        if args.robot:
+            overrides["robot"] = args.robot
 
         def make_actor(env):
             expert = ScriptedExpert(env)
@@ -81,7 +102,7 @@ def evaluate(args: argparse.Namespace) -> int:
     else:
         from ..deploy.policy import load_policy
 
-        policy = load_policy(args.model_dir, args.backend)
+        policy = load_policy(args.model_dir, args.backend, expected_robot=args.robot)
         task, label, meta = policy.task, str(args.model_dir), policy.meta
         # The task as registered, not the training variant (which may randomise; use
         # --training-env for that), with the observation and action the policy was trained on.
@@ -90,10 +111,12 @@ def evaluate(args: argparse.Namespace) -> int:
         def make_actor(env):
             return policy.act, None
     if args.config:
-        from ..config import deep_update, load_yaml
+        from ..config import deep_update
 
-        overrides = deep_update(deep_update(load_yaml("env"), overrides), json.loads(args.config))
+        # Not strict: the environment refuses unknown keys when it loads the result.
+        overrides = deep_update(overrides, json.loads(args.config), strict=False)
     seeds = list(range(args.seed_start, args.seed_start + args.episodes))
+    check_writable(args.out, args.force)
     if getattr(args, "ray", False):
         if args.gif:
             raise ConfigError("--gif records on this machine; run it without --ray")
@@ -111,7 +134,8 @@ def evaluate(args: argparse.Namespace) -> int:
     if meta:
         summary.update({"algo": meta["algo"], "training_steps": meta.get("num_timesteps"),
                         "training_wall_time_s": meta.get("training_wall_time_s"), "machine": meta.get("machine")})
-    out = args.out or (args.model_dir / EVAL_FILE if args.model_dir else Path(f"eval_{task}_expert.json"))
+    out = args.out or Path(f"eval_{Path(args.model_dir).resolve().name}.json" if args.model_dir
+                           else f"eval_{task}_expert.json")
     csv_path = args.csv or out.with_suffix(".csv")
     write_results(summary, records, out, csv_path)
     if not args.no_map:

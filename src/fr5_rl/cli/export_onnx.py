@@ -9,8 +9,8 @@ import argparse
 from pathlib import Path
 from typing import List, Optional
 
-from ..config import ConfigError
-from ..deploy.bundle import ModelFilesError
+from ..config import ConfigError, robot_names
+from ..deploy.bundle import ModelFilesError, arm_of
 from . import fail, script_args
 
 def build_parser() -> argparse.ArgumentParser:
@@ -18,6 +18,8 @@ def build_parser() -> argparse.ArgumentParser:
                                      epilog=__doc__.split("\n\n", 1)[1])
     parser.add_argument("model_dir", type=Path, help="model directory (meta.json, model.zip, vecnormalize.pkl)")
     parser.add_argument("--check", type=int, default=1000, help="parity check on N rollout observations (0: skip)")
+    parser.add_argument("--robot", choices=robot_names(), default=None,
+                        help="refuse a model trained for another arm (default: any)")
     return parser
 
 
@@ -26,6 +28,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     from ..training.onnx_export import PARITY_TOLERANCE, export, parity
 
     try:
+        if args.robot is not None:
+            arm_of(args.model_dir, args.robot)
         path = export(args.model_dir)
         print(f"wrote {path}")
         if args.check:

@@ -20,7 +20,7 @@ import math
 from pathlib import Path
 from typing import List, Optional
 
-from ..config import ConfigError, load_robot_spec, load_yaml, typed
+from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec, load_yaml, robot_names, typed
 from ..deploy.bundle import write_json_atomic
 from ..sim.driver_profile import load_driver_profile, profile_summary, write_driver_profile
 from ..sim_to_real.fit import FitSettings, fit_driver
@@ -37,6 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--joint-states-topic", default=None)
     parser.add_argument("--command-topic", default=None)
     parser.add_argument("--task", choices=["reach", "grasp"], default=None, help="the replay's scene (config's)")
+    parser.add_argument("--robot", choices=robot_names(), default=DEFAULT_ROBOT, help="the arm that made the run (fr5)")
     parser.add_argument("--servo-rates", type=float, nargs="+", default=None, metavar="HZ",
                         help="also try these servo rates (default: config/sim_to_real.yaml's; the base profile's "
                              "rate is always tried)")
@@ -58,12 +59,12 @@ def main(argv: Optional[List[str]] = None) -> int:
             raise ConfigError(f"config/sim_to_real.yaml: fit.loss must be mae or mse, got {fit_settings.loss!r}")
         base_name = args.base_profile or settings["base_profile"]
         base = load_driver_profile(base_name)
-        spec = load_robot_spec()
+        spec = load_robot_spec(args.robot)
         recording = read_recording(args.bag, spec.joint_names, args.joint_states_topic, args.command_topic)
         print(f"fit_driver.py: {recording.source}: {recording.moving_time():.1f} s of motion; trying servo "
               f"rates, delays and phases behind {base_name}'s physics step ({1000 * base.physics_dt:g} ms)")
         result = fit_driver(recording, base, fit_settings, args.task or settings["task"],
-                            progress=None if args.quiet else print)
+                            progress=None if args.quiet else print, robot=args.robot)
         fitted = result.profile
         taus = ", ".join(f"{1000 * tau:.1f}" for tau in fitted.response_time_constant_s)
         header = (f"Driver profile fitted by fit_driver.py to {recording.source}\n"

@@ -9,7 +9,7 @@ import argparse
 from pathlib import Path
 from typing import List, Optional
 
-from ..config import ConfigError
+from ..config import ConfigError, robot_names
 from ..deploy.bundle import ModelFilesError
 from ..training.run_settings import DaggerRun
 from . import fail, script_args
@@ -28,6 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--epochs", type=int, default=None, help="fitting epochs per round (default: the file's)")
     parser.add_argument("--eval-episodes", type=int, default=50, help="evaluation episodes per round (50)")
     parser.add_argument("--torch-threads", type=int, default=1, help="(1)")
+    parser.add_argument("--robot", choices=robot_names(), default=None,
+                        help="the arm (config/robots/); default: the DAgger file's env.robot, else fr5")
     return parser
 
 
@@ -35,7 +37,7 @@ def dagger_run(args: argparse.Namespace) -> DaggerRun:
     """The command line's options as a :class:`DaggerRun`."""
     return DaggerRun(task=args.task, hyperparams=args.hyperparams, run_dir=args.run_dir, seed=args.seed,
                      rounds=args.rounds, episodes=args.episodes, epochs=args.epochs,
-                     eval_episodes=args.eval_episodes, torch_threads=args.torch_threads)
+                     eval_episodes=args.eval_episodes, torch_threads=args.torch_threads, robot=args.robot)
 
 
 def main(argv: Optional[List[str]] = None) -> int:

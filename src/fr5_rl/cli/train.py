@@ -2,7 +2,8 @@
 
 Examples::
 
-    rosrun fr5_rl train.py --task reach                   # PPO, config/ppo_reach.yaml
+    rosrun fr5_rl train.py --task reach                   # PPO, config/ppo_reach.yaml, the FR5
+    rosrun fr5_rl train.py --task reach --robot fr10      # the same for the FR10
     rosrun fr5_rl train.py --task grasp --algo tqc --n-envs 2 --timesteps 300000
     rosrun fr5_rl train.py --resume --run-dir runs/reach_ppo_20261122-1300
     rosrun fr5_rl train.py --task reach --driver-profile fitted.yaml   # fit_driver.py's profile
@@ -15,7 +16,7 @@ import time
 from pathlib import Path
 from typing import List, Optional, Set
 
-from ..config import ConfigError
+from ..config import ConfigError, robot_names
 from ..deploy.bundle import ModelFilesError
 from ..training.run_settings import TrainRun, read_run_config
 from . import fail, script_args
@@ -27,6 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--task", choices=["reach", "grasp"], default="reach")
     parser.add_argument("--algo", choices=["ppo", "sac", "td3", "tqc"], default="ppo")
+    parser.add_argument("--robot", choices=robot_names(), default=None,
+                        help="the arm (config/robots/); default: the hyperparameter file's env.robot, else fr5")
     parser.add_argument("--hyperparams", default=None,
                         help="hyperparameter YAML (default: config/<algo>_<task>.yaml)")
     parser.add_argument("--n-envs", type=int, default=None, help="parallel environments (default: the config's)")
@@ -34,6 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--timesteps", type=int, default=None, help="default: the config's n_timesteps")
     parser.add_argument("--run-dir", type=Path, default=None, help="default: runs/<task>_<algo>_<time>")
     parser.add_argument("--resume", action="store_true", help="continue --run-dir from its last checkpoint")
+    parser.add_argument("--force", action="store_true", help="replace what --run-dir holds (a new run refuses an "
+                                                                 "existing one without it)")
     parser.add_argument("--init-from", type=Path, default=None, metavar="MODEL_DIR",
                         help="start from this trained model (weights + VecNormalize statistics) instead of "
                              "from scratch: fine-tuning, e.g. on a harder randomisation (same task and algo)")
@@ -83,7 +88,7 @@ def train_run(args: argparse.Namespace) -> TrainRun:
                     target_success=args.target_success, stop_at_success=args.stop_at_success,
                     eval_min_training_success=args.eval_min_training_success, subprocess=not args.no_subprocess,
                     processes=args.processes, progress=not args.no_progress, torch_threads=args.torch_threads,
-                    driver_profile=args.driver_profile)
+                    driver_profile=args.driver_profile, robot=args.robot, force=args.force)
 
 
 def main(argv: Optional[List[str]] = None) -> int:

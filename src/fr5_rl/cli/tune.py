@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 from typing import List, Optional
 
-from ..config import ConfigError
+from ..config import ConfigError, robot_names
 from ..deploy.bundle import ModelFilesError
 from . import fail, script_args
 
@@ -32,6 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--task", choices=["reach", "grasp"], default="reach")
     parser.add_argument("--algo", choices=["ppo", "sac", "td3", "tqc"], default="ppo")
+    parser.add_argument("--robot", choices=robot_names(), default=None,
+                        help="the arm every trial trains for (default: the hyperparameter file's env.robot, else fr5)")
     parser.add_argument("--samples", type=int, default=8, help="trials to sample (8)")
     parser.add_argument("--search", choices=["optuna", "random"], default="optuna")
     parser.add_argument("--scheduler", choices=["asha", "none"], default="asha")
@@ -67,7 +69,7 @@ def main(argv: Optional[List[str]] = None) -> int:
             out = args.out or Path("runs") / f"tune_{args.task}_{args.algo}_{time.strftime('%Y%m%d-%H%M%S')}"
             settings = build_settings(args.task, args.algo, args.samples, args.search, args.scheduler, out,
                                       args.space, args.max_timesteps, args.n_envs, args.seed, args.storage,
-                                      args.processes)
+                                      args.processes, args.robot)
             experiment = TuneExperiment(settings, args.address)
         rows = experiment.run(resume=args.resume is not None)
     except (ConfigError, ModelFilesError) as error:

@@ -32,8 +32,9 @@ import threading
 import zipfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Callable, Dict, Iterator, Mapping, Optional, Type
+from typing import Any, Callable, Dict, Iterator, Mapping, Optional, Tuple, Type
 
+from ..config import DEFAULT_ROBOT, check_robot_name, package_root, robot_config
 from ..env_config import EnvConfig
 
 MODEL_FILE = "model.zip"
@@ -45,7 +46,7 @@ EVAL_FILE = "eval.json"
 ALGORITHMS = ("ppo", "sac", "td3", "tqc")
 BACKENDS = ("torch", "onnx")
 # meta.json fields every loader relies on, with their JSON types.
-REQUIRED_META = {"task": str, "algo": str, "observation_size": int, "action_size": int}
+REQUIRED_META = {"task": str, "algo": str, "robot": str, "observation_size": int, "action_size": int}
 # Entries Stable-Baselines3 writes into every model.zip.
 _SB3_ZIP_ENTRIES = ("data", "policy.pth")
 
@@ -89,18 +90,21 @@ def machine_description() -> Dict[str, Any]:
 
 
 def build_meta(task: str, algo: str, env_overrides: Mapping[str, Any], env_config: EnvConfig,
-               robot_config: Mapping[str, Any], observation_size: int, action_size: int, control_dt: float,
+               observation_size: int, action_size: int, control_dt: float,
                seed: int, **extra: Any) -> Dict[str, Any]:
     """The ``meta.json`` of a model: written here only, whoever trained it.
 
-    :param env_overrides: the overrides the model was trained with (merged over env.yaml).
-    :param env_config: the resulting environment configuration, checked again at load time.
-    :param robot_config: ``config/robot.yaml`` as trained with.
+    :param env_overrides: the overrides the model was trained with (merged over env.yaml); they
+        name the arm (``robot``), so that a loader builds the same configuration.
+    :param env_config: the resulting environment configuration, checked again at load time. Its
+        arm's description (``config/robots/<robot>.yaml`` with the gripper) is saved as
+        ``robot_config`` and its name as ``robot``.
     :param control_dt: control period (s) the model was trained at.
     :param extra: further provenance (e.g. ``n_envs``, ``trained_by``, ``num_timesteps``).
     """
-    meta = {"task": task, "algo": algo, "env_overrides": dict(env_overrides), "env_config": env_config.to_dict(),
-            "robot_config": dict(robot_config), "observation_size": int(observation_size),
+    meta = {"task": task, "algo": algo, "robot": env_config.robot,
+            "env_overrides": {**dict(env_overrides), "robot": env_config.robot}, "env_config": env_config.to_dict(),
+            "robot_config": robot_config(env_config.robot), "observation_size": int(observation_size),
             "action_size": int(action_size), "control_dt": float(control_dt), "seed": int(seed)}
     meta.update(extra)
     return meta
@@ -204,6 +208,7 @@ def check_files_present(directory: Path, backend: str) -> None:
     directory = Path(directory)
     if not directory.is_dir():
         raise ModelFilesError(f"{directory}: no such model directory; pass the directory that holds {META_FILE}")
+    check_not_a_run(directory)
     for name in required_files(backend):
         if name == META_FILE or (directory / name).is_file():
             continue  # meta.json: read_meta says what is wrong with it
@@ -216,10 +221,66 @@ def check_files_present(directory: Path, backend: str) -> None:
         raise ModelFilesError(f"{directory / name} is missing: {remedy}")
 
 
+def check_not_a_run(directory: Path) -> None:
+    """Refuse a training run's directory (``train.py``'s or ``imitate.py``'s) given as a model,
+    naming the model inside it."""
+    if not (directory / META_FILE).is_file() and (directory / "final" / META_FILE).is_file():
+        raise ModelFilesError(f"{directory} is a training run, not a model: its model is {directory / 'final'} "
+                              f"(the best evaluated one: {directory / 'best'})")
+
+
+def resolve_model_dir(path: str | Path, caller_dir: Optional[str | Path] = None) -> Path:
+    """Where a model directory given by a user is: an absolute path as it is; a relative one in the
+    caller's directory, else in the package (``models/reach`` from anywhere), as ``rosrun``,
+    ``roslaunch`` and the Python API all take it.
+
+    :param caller_dir: the directory the user typed the path in (a node started by roslaunch runs
+        elsewhere: the launch passes it); None: the current directory.
+    :raises ModelFilesError: neither place holds the directory; the message names both.
+    """
+    path = Path(path)
+    if path.is_absolute():
+        candidates = [path]
+    else:
+        candidates = [Path(caller_dir or Path.cwd()) / path, package_root() / path]
+    for candidate in candidates:
+        if candidate.is_dir():
+            return candidate
+    raise ModelFilesError(f"no such model directory: {path} (looked in {' and '.join(str(c) for c in candidates)})")
+
+
+def task_and_arm(model_dir: Optional[str | Path], task: Optional[str] = None,
+                 robot: Optional[str] = None, caller_dir: Optional[str | Path] = None) -> Tuple[str, str]:
+    """The task and the arm a launch or a tool runs: the model's (its ``meta.json``), which
+    ``task`` and ``robot`` must not contradict; without a model, those given or the defaults
+    (``reach``, ``fr5``).
+
+    :raises ModelFilesError: the model is missing or damaged, or was trained on another task or
+        for another arm; the message says what to pass instead.
+    :raises ConfigError: an unknown arm.
+    """
+    if model_dir is None:
+        return task or "reach", check_robot_name(robot or DEFAULT_ROBOT)
+    meta = read_meta(resolve_model_dir(model_dir, caller_dir))
+    if task is not None and task != meta["task"]:
+        raise ModelFilesError(f"{model_dir} was trained on '{meta['task']}', not '{task}': pass a {task} model, or "
+                              "leave the task out to use the model's")
+    if robot is not None and robot != meta["robot"]:
+        raise ModelFilesError(f"{model_dir} was trained for the {meta['robot']}, not the {robot}: pass a model "
+                              f"trained for the {robot}, or leave robot out to use the model's")
+    return meta["task"], check_robot_name(meta["robot"])
+
+
+def arm_of(model_dir: Optional[str | Path], robot: Optional[str]) -> str:
+    """The arm a launch or a tool runs (:func:`task_and_arm`'s)."""
+    return task_and_arm(model_dir, None, robot)[1]
+
+
 def read_meta(directory: Path) -> Dict[str, Any]:
     """Read and check ``meta.json``: valid JSON, an object, with the fields loaders rely on."""
     path = Path(directory) / META_FILE
     if not path.is_file():
+        check_not_a_run(Path(directory))
         raise ModelFilesError(f"{path} is missing: copy the complete model directory, or re-run the training "
                               "that made it")
     try:

@@ -148,8 +148,9 @@ class SafetyZone:
         self.tcp_min_height = zone.tcp_min_height
         self.self_margin = zone.self_margin
         self.radii = {name: getattr(zone.link_radii, name) for name in self.LINKS}
-        self.gripper_length = zone.gripper_length
-        self.tcp_offset = float(robot.tcp_offset)
+        # Both from the wrist centre (the j6 origin): the gripper body reaches past the flange face.
+        self.gripper_length = float(robot.flange_offset) + zone.gripper_length
+        self.tcp_offset = float(robot.tcp_offset_from_wrist)
 
     def capsules(self, joint_positions: Sequence[float]) -> Mapping[str, Tuple[np.ndarray, np.ndarray]]:
         """Each link's segment (two points, m, base_link) for joint angles (rad)."""

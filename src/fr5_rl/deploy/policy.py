@@ -21,17 +21,17 @@ from typing import Any, Dict, List, Mapping, Optional
 
 import numpy as np
 
-from ..config import load_yaml
+from ..config import robot_config, robot_names
 from ..env_config import EnvConfig, load_env_config
 from ..control import ACTION_SIZE
 from ..observation import observation_size, saved_observation_settings
 from .bundle import (META_FILE, MODEL_FILE, ONNX_FILE, STATS_FILE, ModelFilesError, algorithm_class,
-                     check_files_present, check_sb3_zip, damaged, read_meta)
+                     check_files_present, check_sb3_zip, damaged, read_meta, resolve_model_dir)
 
 TASKS = ("reach", "grasp")
 # Settings a trained policy depends on: change one and the observation or the action means
 # something else than during training.
-DEPLOYMENT_SETTINGS = (("simulation", "control_dt"), ("action",), ("observation",))
+DEPLOYMENT_SETTINGS = (("robot",), ("simulation", "control_dt"), ("action",), ("observation",))
 
 
 class Policy:
@@ -193,21 +193,39 @@ def config_mismatches(meta: Mapping[str, Any], current_env: Optional[EnvConfig] 
                 differences.append(f"env {'.'.join(path)}: trained with {saved}, now {current}")
     saved_robot = meta.get("robot_config")
     if saved_robot is not None:
-        current_robot = load_yaml("robot")
-        for section in ("arm", "gripper", "home_joint_positions"):
-            if not isinstance(saved_robot, dict) or saved_robot.get(section) != current_robot.get(section):
-                differences.append(f"robot.yaml '{section}' differs from the one the model was trained with")
+        robot = str(meta["robot"])
+        current_robot = robot_config(robot)
+        # The cell is env_config's (compared above); the title is words.
+        for key in sorted(set(saved_robot if isinstance(saved_robot, dict) else {}) | set(current_robot)):
+            if key in ("cell", "title"):
+                continue
+            if not isinstance(saved_robot, dict) or saved_robot.get(key) != current_robot.get(key):
+                source = "config/gripper.yaml" if key == "gripper" else f"config/robots/{robot}.yaml"
+                differences.append(f"{source} '{key}' differs from the one the model was trained with")
     return differences
 
 
-def check_meta_matches_code(model_dir: Path, meta: Mapping[str, Any], expected_task: Optional[str] = None) -> None:
-    """Refuse a model whose task, sizes or deployment settings do not match this code."""
+def check_meta_matches_code(model_dir: Path, meta: Mapping[str, Any], expected_task: Optional[str] = None,
+                            expected_robot: Optional[str] = None) -> None:
+    """Refuse a model whose task, arm, sizes or deployment settings do not match this code.
+
+    :param expected_task: refuse a model trained on another task (None: any).
+    :param expected_robot: refuse a model trained for another arm (None: any).
+    """
     path = Path(model_dir) / META_FILE
-    task = meta["task"]
+    task, robot = meta["task"], meta["robot"]
     if task not in TASKS:
         raise ModelFilesError(f"{path}: unknown task '{task}' (this fr5_rl knows {', '.join(TASKS)})")
+    if robot not in robot_names():
+        raise ModelFilesError(f"{path}: unknown robot '{robot}' (this fr5_rl describes {', '.join(robot_names())})")
     if expected_task is not None and task != expected_task:
         raise ModelFilesError(f"{model_dir} was trained on '{task}', not '{expected_task}': pass a {expected_task} model")
+    if expected_robot is not None and robot != expected_robot:
+        raise ModelFilesError(f"{model_dir} was trained for the {robot}, not the {expected_robot}: pass a model "
+                              f"trained for the {expected_robot}, or leave the robot out to use the model's")
+    if meta.get("env_overrides", {}).get("robot") != robot:
+        raise ModelFilesError(f"{path}: 'robot' is {robot} but its env_overrides say "
+                              f"{meta.get('env_overrides', {}).get('robot')}: the file is damaged; copy it again from the original")
     current_env = load_env_config(meta.get("env_overrides", {}))
     expected_size = observation_size(task, current_env.observation)
     if meta["observation_size"] != expected_size:
@@ -224,19 +242,21 @@ def check_meta_matches_code(model_dir: Path, meta: Mapping[str, Any], expected_t
                               + ". Restore those settings or retrain the model.")
 
 
-def load_policy(model_dir: str | Path, backend: str = "torch", expected_task: Optional[str] = None) -> Policy:
+def load_policy(model_dir: str | Path, backend: str = "torch", expected_task: Optional[str] = None,
+                expected_robot: Optional[str] = None) -> Policy:
     """Load a model directory for inference.
 
     :param model_dir: directory with ``meta.json`` and the backend's files.
     :param backend: ``torch`` or ``onnx``.
     :param expected_task: refuse a model trained on another task.
+    :param expected_robot: refuse a model trained for another arm.
     :raises ModelFilesError: a file is missing, damaged, or does not match this code; the
         message names the file and says what to do.
     """
-    model_dir = Path(model_dir)
+    model_dir = resolve_model_dir(model_dir)
     check_files_present(model_dir, backend)
     meta: Dict[str, Any] = read_meta(model_dir)
-    check_meta_matches_code(model_dir, meta, expected_task)
+    check_meta_matches_code(model_dir, meta, expected_task, expected_robot)
     if backend == "torch":
         return TorchPolicy(model_dir, meta)
     return OnnxPolicy(model_dir, meta)

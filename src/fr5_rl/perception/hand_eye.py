@@ -99,7 +99,8 @@ class CalibrationSettings:
     poses: int
     min_poses: int
     seed: int
-    centre: List[float]
+    centre_tcp: List[float]  # m, base_link: the tcp at the centre of the poses, gripper straight down
+    centre_yaw: float  # rad, the tcp's x axis there from base x, about base z
     spread: List[float]
     max_tilt: float
     min_cup_clearance: float
@@ -135,8 +136,8 @@ class CalibrationSettings:
     def check(self, source: str) -> None:
         if self.min_poses < 4 or self.poses < 1:
             raise ConfigError(f"{source}: 'min_poses' must be >= 4 (9 unknowns, 3 equations a pose) and 'poses' >= 1")
-        if len(self.centre) != 6 or len(self.spread) != 6:
-            raise ConfigError(f"{source}: 'centre' and 'spread' need 6 values (rad, j1..j6)")
+        if len(self.centre_tcp) != 3 or len(self.spread) != 6:
+            raise ConfigError(f"{source}: 'centre_tcp' needs 3 values (m, base_link) and 'spread' 6 (rad, j1..j6)")
         check_positive(source, move_speed=self.move_speed, arrival=self.arrival, settle_speed=self.settle_speed,
                        settle_time=self.settle_time, frames_per_pose=self.frames_per_pose,
                        frame_timeout=self.frame_timeout, move_timeout=self.move_timeout,

@@ -35,8 +35,9 @@ from typing import Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..config import ConfigError, load_robot_spec
+from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec, robot_names
 from .calibration_motion import CalibrationMove, calibration_poses
+from .robot_description import robot_name
 from ..deploy.joint_state import JointStateReader
 from ..motion_guard import load_guard_settings
 from ..env_config import load_env_config
@@ -74,12 +75,12 @@ class Calibration:
     """The configured frames and the solve, shared by the live and the bag paths.
 
     :param settings: config/calibration.yaml. :param mount_config: the transforms file to start
-        from and to write the result like.
+        from and to write the result like. :param robot: the arm on the cell (``config/robots/``).
     """
 
-    def __init__(self, settings: CalibrationSettings, mount_config: str) -> None:
+    def __init__(self, settings: CalibrationSettings, mount_config: str, robot: str = DEFAULT_ROBOT) -> None:
         self.settings = settings
-        self.robot = load_robot_spec()
+        self.robot = load_robot_spec(robot)
         self.mount_entries = load_static_transforms(mount_config)
         entries = load_transform_files([mount_config, settings.frames_config])
         self.mount = transform_in(entries, settings.base_frame, settings.mount_frame)
@@ -385,6 +386,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--config", default="calibration", help="settings file (a path or a name in config/)")
     parser.add_argument("--mount-config", help="the configured transforms file: the start, and what is kept "
                                                "(default: the settings' mount_config, config/static_transforms.yaml)")
+    parser.add_argument("--robot", choices=robot_names(), default=None,
+                        help="the arm on the cell (default: the one /robot_description names live, fr5 from a bag)")
     parser.add_argument("--joint-states", help="joint state topic (default: the settings'; FAIRINO driver: "
                                                "/frrobot/joint_states)")
     parser.add_argument("--command", help="arm command topic (default: the settings'; FAIRINO driver: "
@@ -403,7 +406,13 @@ def main(argv: Optional[List[str]] = None) -> int:
         if count < settings.min_poses:
             raise CalibrationRefused(f"--poses {count}: at least {settings.min_poses} needed: "
                                      f"{settings.min_poses - count} more")
-        calibration = Calibration(settings, args.mount_config or settings.mount_config)
+        robot = args.robot or DEFAULT_ROBOT
+        if not args.bag and args.robot is None:
+            import rospy
+
+            if rospy.has_param("/robot_description"):  # the arm the running launch describes
+                robot = robot_name(rospy.get_param("/robot_description"))
+        calibration = Calibration(settings, args.mount_config or settings.mount_config, robot)
         joint_states = args.joint_states or settings.joint_states_topic
         if args.bag:
             if not Path(args.bag).is_file():

@@ -22,11 +22,27 @@ import numpy as np
 
 from ..config import RobotSpec
 from ..env_config import EnvConfig
-from ..kinematics import ForwardKinematics
+from ..kinematics import ForwardKinematics, InverseKinematics
 from ..perception.camera_model import Intrinsics
 from ..perception.hand_eye import CalibrationSettings
 from ..deploy.deployment import SafetyGate, SafetyZone
 from ..motion_guard import MotionGuard, MotionGuardSettings
+
+
+def centre_configuration(settings: CalibrationSettings, robot: RobotSpec) -> np.ndarray:
+    """The arm's configuration (rad, j1..j6) at the centre of the poses: the tcp at
+    ``centre_tcp``, straight down, turned by ``centre_yaw``, by inverse kinematics from home.
+
+    :raises RuntimeError: the arm cannot reach it.
+    """
+    c, s = math.cos(settings.centre_yaw), math.sin(settings.centre_yaw)
+    down = (c, s, 0.0, s, -c, 0.0, 0.0, 0.0, -1.0)  # tcp x = (c, s, 0), z = straight down
+    joints, converged = InverseKinematics(ForwardKinematics(robot)).solve(
+        robot.home_joint_positions, settings.centre_tcp, down, max_iterations=100)
+    if not converged:
+        raise RuntimeError(f"the {robot.model} cannot put its tcp at centre_tcp {settings.centre_tcp} pointing down: "
+                           "move it in config/calibration.yaml")
+    return np.asarray(joints)
 
 
 def calibration_poses(settings: CalibrationSettings, robot: RobotSpec, env_cfg: EnvConfig,
@@ -45,7 +61,7 @@ def calibration_poses(settings: CalibrationSettings, robot: RobotSpec, env_cfg: 
     zone = SafetyZone(robot, env_cfg)
     lower = robot.lower_limits + guard.joint_limit_margin
     upper = robot.upper_limits - guard.joint_limit_margin
-    centre, spread = np.asarray(settings.centre), np.asarray(settings.spread)
+    centre, spread = centre_configuration(settings, robot), np.asarray(settings.spread)
     optical_from_base = np.linalg.inv(base_from_optical)
     table = env_cfg.table.top_height
     half_height = settings.cup.height / 2.0

@@ -46,7 +46,7 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import Marker
 
-from ..config import ConfigError, load_robot_spec
+from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec
 from ..env_config import load_env_config
 from ..perception.camera_model import Intrinsics, IntrinsicsError
 from ..perception.hand_eye import offset_transform
@@ -54,8 +54,10 @@ from ..sim.camera import RENDERERS, SimulatedCamera, depth_to_millimetres
 from ..transforms import load_transform_files, transform_in
 from .images import camera_info_message, image_message
 from .params import exit_if_help_asked, node_parameters
+from .robot_description import robot_name
 from .scheduling import lower_priority, runs_idle
 from .static_transforms import to_messages
+from .lifetime import init_node
 
 
 class JointStateHistory:
@@ -173,9 +175,13 @@ class CameraNode:
         # joint states, the policy's commands). When the CPU is short, frames come less often.
         lower_priority(params.nice, idle=params.idle)
         self.intrinsics = params.intrinsics()
-        spec = load_robot_spec()
+        # The arm the launch describes (robot_description.py names the URDF after it), as rviz and
+        # robot_state_publisher draw it: the camera sees the same arm.
+        robot = robot_name(rospy.get_param("/robot_description")) if rospy.has_param("/robot_description") \
+            else DEFAULT_ROBOT
+        spec = load_robot_spec(robot)
         render_pose, camera_frames = params.transforms()
-        arguments = (load_env_config(), list(spec.joint_names) + list(spec.finger_joint_names), render_pose,
+        arguments = (load_env_config({"robot": robot}), list(spec.joint_names) + list(spec.finger_joint_names), render_pose,
                      self.intrinsics.opengl_projection(params.near, params.far),
                      params.width, params.height, params.near, params.far)
         try:
@@ -270,7 +276,7 @@ class CameraNode:
 
 def main() -> int:
     exit_if_help_asked("camera_node.py", __doc__.split("\n\n")[0], "camera")
-    rospy.init_node("camera")
+    init_node("camera")
     try:
         node = CameraNode()
     except (ConfigError, RuntimeError) as error:

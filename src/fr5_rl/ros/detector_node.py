@@ -54,6 +54,7 @@ from ..perception.tracker import ObjectTracker, TrackedObject, TrackerSettings, 
 from ..transforms import matrix_from_quaternion, quaternion_from_matrix
 from .images import image_message
 from .params import exit_if_help_asked, node_parameters
+from .lifetime import init_node
 
 TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.ExtrapolationException,
              tf2_ros.InvalidArgumentException)
@@ -321,7 +322,7 @@ class DetectorNode:
 
 def main() -> int:
     exit_if_help_asked("detector_node.py", __doc__.split("\n\n")[0], "detector")
-    rospy.init_node("detector")
+    init_node("detector")
     try:
         DetectorNode()
     except ConfigError as error:

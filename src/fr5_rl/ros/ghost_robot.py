@@ -16,12 +16,13 @@ from geometry_msgs.msg import TransformStamped
 
 from .params import exit_if_help_asked
 from .robot_description import prefixed_description
+from .lifetime import init_node
 
 
 def main() -> int:
     exit_if_help_asked("ghost_robot_node.py", __doc__.split("\n\n")[0] + "\n\n~prefix (default ghost/), "
                        "~base_frame (default base_link)")
-    rospy.init_node("ghost_robot")
+    init_node("ghost_robot")
     prefix = str(rospy.get_param("~prefix", "ghost/"))
     base_frame = str(rospy.get_param("~base_frame", "base_link"))
     try:

@@ -31,6 +31,7 @@ from std_msgs.msg import Bool, Float64, String
 from ..config import ConfigError, load_robot_spec
 from ..drivers.gripper_bridge import BridgeStatus, GripperBridge, GripperBridgeParams, GripperReading
 from .params import exit_if_help_asked, node_parameters
+from .lifetime import init_node
 
 
 def log_to_rosout(level: str, text: str) -> None:
@@ -105,7 +106,7 @@ def diagnostics_message(status: BridgeStatus, node_name: str) -> DiagnosticArray
 
 def main() -> int:
     exit_if_help_asked("gripper_bridge_node.py", __doc__.split("\n\n")[0], "gripper_bridge")
-    rospy.init_node("fr5_gripper_bridge")
+    init_node("fr5_gripper_bridge")
     try:
         GripperBridgeNode()
     except ConfigError as error:

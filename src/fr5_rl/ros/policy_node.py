@@ -29,7 +29,6 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Optional
 
 import numpy as np
@@ -44,14 +43,15 @@ from std_msgs.msg import Bool, Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 from visualization_msgs.msg import Marker
 
-from ..config import ConfigError, check_positive, load_robot_spec, package_root
+from ..config import ConfigError, check_positive, load_robot_spec
 from ..env_config import load_env_config
-from ..deploy.bundle import ModelFilesError
+from ..deploy.bundle import ModelFilesError, resolve_model_dir
 from ..deploy.deployment import Command, DeploymentStep, Hold, HoldReason, StepInputs
 from ..deploy.joint_state import FreshStateWait, JointStateReader, Reading, velocities_from_positions
 from ..motion_guard import MotionGuardSettings, StartPhase
 from ..deploy.policy import load_policy
 from .params import exit_if_help_asked, node_parameters
+from .lifetime import init_node
 
 TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.ExtrapolationException,
              tf2_ros.InvalidArgumentException)
@@ -67,6 +67,8 @@ class PolicyNodeParams:
     """``config/policy_node.yaml``: the policy node's ~private parameters."""
 
     model_dir: str
+    caller_dir: str  # where a relative model_dir was typed (roslaunch's directory); "": the current one
+    robot: str  # "": the model's arm
     backend: str
     rate: float
     base_frame: str
@@ -114,12 +116,11 @@ class PolicyNode:
 
     def __init__(self) -> None:
         self.params = params = node_parameters(PolicyNodeParams, "policy_node")
-        model_dir = Path(params.model_dir)
-        if not model_dir.is_absolute():
-            model_dir = package_root() / model_dir
-        robot = load_robot_spec()
-        policy = load_policy(model_dir, params.backend)
+        # A relative path: from the directory roslaunch was started in, then the package.
+        model_dir = resolve_model_dir(params.model_dir, params.caller_dir or None)
+        policy = load_policy(model_dir, params.backend, expected_robot=params.robot or None)
         env_cfg = load_env_config(policy.meta.get("env_overrides", {}))
+        robot = load_robot_spec(env_cfg.robot)
         self.step = DeploymentStep(policy, robot, env_cfg, params.joint_state_timeout, params.target_timeout,
                                    target_workspace_margin=params.target_workspace_margin,
                                    future_stamp_tolerance=params.future_stamp_tolerance,
@@ -405,12 +406,12 @@ class PolicyNode:
 
 def main() -> int:
     exit_if_help_asked("policy_node.py", __doc__.split("\n\n")[0], "policy_node")
-    rospy.init_node("fr5_policy")
+    init_node("fr5_policy")
     try:
         PolicyNode()
     except (ConfigError, ModelFilesError) as error:
         rospy.logfatal(f"policy_node: {error}")
-        return 1
+        return 2
     # The start-up's objects (modules, the model, rospy) live as long as the node: out of the
     # collector's reach, a full collection walks only what the loop allocates (offline: a
     # 24 ms pause with onnxruntime loaded, 0.7 ms frozen; with torch, over 320,000 objects).

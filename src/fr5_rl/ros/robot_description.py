@@ -1,19 +1,26 @@
-"""URDF trees for launch files: the FR5 renamed for a ghost, or the part below one link.
+"""URDF trees for launch files: an arm's description, the model's arm, renamed for a ghost, or
+the part below its flange.
 
-``robot_description.py --prefix PREFIX URDF`` prints the URDF with every link renamed
-``<PREFIX><name>`` (the dry run's ghost robot). ``robot_description.py --subtree ROOT URDF`` prints
-only ``ROOT`` and what hangs below it: with the vendor's robot_state_publisher publishing the arm's
-links on a real cell, ours publishes the gripper and the ``tcp`` below ``wrist3_Link`` and
-nothing twice. A launch file's ``<param command=...>`` sets a ``robot_description`` with either,
-before any node starts.
+``robot_description.py [--robot R] [--model DIR] [--prefix PREFIX | --below-flange]`` prints the
+URDF of the arm ``R`` (``urdf/<R>.urdf``), or of the arm the model in ``DIR`` was trained for, or
+the FR5's; a ``--robot`` that contradicts the model's refuses (exit 2), so the launch stops before
+any node starts. ``--prefix`` renames every link ``<PREFIX><name>`` (the dry run's ghost robot).
+``--below-flange`` keeps only the flange and what hangs below it, attached to the vendor driver's
+link at the flange face (``tool_Link`` in its current URDFs): with the vendor's
+robot_state_publisher publishing the arm's links on a real cell, ours publishes the gripper and
+the ``tcp`` and nothing twice. A launch file's ``<param command=...>`` sets a
+``robot_description`` with it, before any node starts.
 """
 from __future__ import annotations
 
+import argparse
 import sys
 import xml.etree.ElementTree as ET
 from typing import List, Optional, Tuple
 
-USAGE = "usage: robot_description.py --prefix PREFIX URDF | --subtree ROOT URDF"  # stdout on --help, stderr on a mistake
+from ..config import ConfigError, load_robot_spec, urdf_path
+from ..deploy.bundle import ModelFilesError, arm_of
+
 
 
 def _robot(urdf: str) -> ET.Element:
@@ -29,6 +36,11 @@ def _root_of(robot: ET.Element) -> str:
     if len(roots) != 1:
         raise ValueError(f"the URDF has {len(roots)} root links, a tree has one")
     return roots[0]
+
+
+def robot_name(urdf: str) -> str:
+    """The ``<robot name=...>`` of a URDF: the arm's model (``fr5``, ``fr10``, …) in this package's."""
+    return str(_robot(urdf).get("name"))
 
 
 def prefixed_description(urdf: str, prefix: str) -> Tuple[str, str]:
@@ -47,12 +59,14 @@ def prefixed_description(urdf: str, prefix: str) -> Tuple[str, str]:
     return ET.tostring(robot, encoding="unicode"), prefix + root
 
 
-def subtree_description(urdf: str, root: str) -> Tuple[str, List[str]]:
+def subtree_description(urdf: str, root: str, attach_to: Optional[str] = None) -> Tuple[str, List[str]]:
     """``urdf`` cut to ``root`` and every link below it, and the movable joints it keeps.
 
     The kept root has no inertia (KDL refuses a root that has one), so robot_state_publisher
     takes it without a warning.
 
+    :param attach_to: a link of another description (the vendor driver's at the same place) to
+        hang ``root`` from, with a fixed joint that does not move it; None: ``root`` is the root.
     :raises ValueError: not a URDF, or no link named ``root``.
     """
     robot = _robot(urdf)
@@ -80,25 +94,42 @@ def subtree_description(urdf: str, root: str) -> Tuple[str, List[str]]:
     for link in robot.findall("link"):
         if link.get("name") == root and link.find("inertial") is not None:
             link.remove(link.find("inertial"))
+    if attach_to is not None and attach_to != root:
+        ET.SubElement(robot, "link", name=attach_to)
+        joint = ET.SubElement(robot, "joint", name=f"{attach_to}_to_{root}", type="fixed")
+        ET.SubElement(joint, "parent", link=attach_to)
+        ET.SubElement(joint, "child", link=root)
+        ET.SubElement(joint, "origin", xyz="0 0 0", rpy="0 0 0")
     return ET.tostring(robot, encoding="unicode"), joints
 
 
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="robot_description.py", description=__doc__.split("\n\n")[0],
+                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser.add_argument("--robot", default="", help="the arm (config/robots/); default: the model's, else fr5")
+    parser.add_argument("--model", default="", metavar="DIR", help="a model directory: its meta.json names its arm")
+    mode = parser.add_mutually_exclusive_group()
+    mode.add_argument("--prefix", default=None, help="rename every link <PREFIX><name> (a ghost robot)")
+    mode.add_argument("--below-flange", action="store_true",
+                      help="only the flange and below, hung from the vendor driver's flange link")
+    return parser
+
+
 def main(argv: Optional[List[str]] = None) -> int:
-    args = sys.argv[1:] if argv is None else argv
-    if args and args[0] in ("-h", "--help"):
-        print(USAGE + "\n\n" + __doc__.split("\n\n")[1].strip())
-        return 0
-    if len(args) != 3 or args[0] not in ("--prefix", "--subtree"):
-        print(USAGE, file=sys.stderr)
-        return 2
     try:
-        with open(args[2], encoding="utf-8") as file:
-            urdf = file.read()
-        if args[0] == "--prefix":
-            print(prefixed_description(urdf, args[1])[0])
-        else:
-            print(subtree_description(urdf, args[1])[0])
-    except (OSError, ValueError, ET.ParseError) as error:
+        args = build_parser().parse_args(sys.argv[1:] if argv is None else argv)
+    except SystemExit as done:  # --help (0) or a mistake (2), as a status to return
+        return int(done.code or 0)
+    try:
+        robot = arm_of(args.model or None, args.robot or None)
+        spec = load_robot_spec(robot)
+        urdf = urdf_path(robot).read_text(encoding="utf-8")
+        if args.prefix is not None:
+            urdf = prefixed_description(urdf, args.prefix)[0]
+        elif args.below_flange:
+            urdf = subtree_description(urdf, spec.flange_frame, spec.driver_flange_link)[0]
+        print(urdf)
+    except (OSError, ValueError, ET.ParseError, ConfigError, ModelFilesError) as error:
         print(f"robot_description.py: {error}", file=sys.stderr)
         return 2
     return 0

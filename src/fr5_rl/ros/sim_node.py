@@ -59,6 +59,7 @@ from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..config import ConfigError, check_positive, check_time_constants, whole_multiple
+from ..deploy.bundle import ModelFilesError, task_and_arm
 from ..envs import EpisodeVerdict, FR5Env, JointStates
 from ..sim.controller_emulator import ControllerEmulator, ControllerEmulatorSettings
 from ..sim.pacing import AlignedStepSchedule, ArrivalQueue, StepSchedule, TimeSchedule, WallClockPacer
@@ -66,6 +67,7 @@ from ..sim.servo import FirstOrderResponse, ServoCycle
 from ..transforms import load_static_transforms, matrix_from_quaternion, quaternion_from_matrix, transform_in
 from .params import exit_if_help_asked, node_parameters
 from .sim_messages import joint_state_message, object_marker, scene_markers
+from .lifetime import init_node
 
 
 @dataclass(frozen=True)
@@ -73,6 +75,9 @@ class SimNodeParams:
     """``config/sim_node.yaml``: the simulator node's ~private parameters."""
 
     task: str
+    model: str  # the policy's model directory: its task is judged and its arm simulated ("": none given)
+    caller_dir: str  # where a relative model was typed (roslaunch's directory); "": the current one
+    robot: str  # the arm, which must be the model's ("": the model's, else fr5)
     seed: int
     episodes: int
     publish_rate: float
@@ -121,8 +126,8 @@ class SimNodeParams:
         if self.episode_start == "go_to_start" and (self.lockstep or not self.policy_reset_service):
             raise ConfigError(f"{source}: 'episode_start: go_to_start' needs real time and a policy_reset_service "
                               "(the policy node's start move begins each episode)")
-        if self.task not in ("reach", "grasp"):
-            raise ConfigError(f"{source}: 'task' must be reach or grasp, got {self.task!r}")
+        if self.task not in ("", "reach", "grasp"):
+            raise ConfigError(f"{source}: 'task' must be reach, grasp or \"\" (the model's), got {self.task!r}")
         check_positive(source, publish_rate=self.publish_rate, physics_dt=self.physics_dt, camera_rate=self.camera_rate,
                   marker_rate=self.marker_rate, solver_iterations=self.solver_iterations)
         if min(self.episodes, self.camera_noise_std, self.pause_between_episodes, self.reset_settle_time) < 0:
@@ -140,16 +145,19 @@ class SimulatorNode:
     def __init__(self) -> None:
         # ---- parameters (config/sim_node.yaml)
         self.params = params = node_parameters(SimNodeParams, "sim_node")
-        task = params.task
+        # The model decides what is judged and which arm is simulated; a ~task or ~robot that
+        # contradicts it refuses.
+        task, robot = task_and_arm(params.model or None, params.task or None, params.robot or None,
+                                   params.caller_dir or None)
         if params.lockstep:
             if params.servo_rate > 0 or any(params.response_time_constant_s):
                 raise ConfigError("sim_node: lockstep advances whole control periods as gym does; it cannot also "
                                   "model a servo cycle or response: set ~servo_rate 0 and "
                                   "~response_time_constant_s [] (driver:=default) or ~lockstep false")
-            self.env = FR5Env(task=task)  # the gym world, as `evaluate.py` builds it
+            self.env = FR5Env(task=task, robot=robot)  # the gym world, as `evaluate.py` builds it
         else:
             # The stand-in arm runs at its own physics step, finer than reach training uses.
-            self.env = FR5Env(task=task, config={task: {"simulation": {
+            self.env = FR5Env(task=task, robot=robot, config={task: {"simulation": {
                 "physics_dt": params.physics_dt, "solver_iterations": params.solver_iterations}}})
         self.spec = self.env.robot_spec
         self.physics_dt = self.env.physics_dt
@@ -626,12 +634,12 @@ class SimulatorNode:
 
 def main() -> int:
     exit_if_help_asked("sim_node.py", __doc__.split("\n\n")[0], "sim_node")
-    rospy.init_node("fr5_sim")
+    init_node("fr5_sim")
     try:
         node = SimulatorNode()
-    except ConfigError as error:
+    except (ConfigError, ModelFilesError) as error:
         rospy.logfatal(str(error))
-        return 1
+        return 2
     node.spin()
     node.env.close()
     if not rospy.is_shutdown():

@@ -23,6 +23,7 @@ from geometry_msgs.msg import TransformStamped
 from ..config import ConfigError, load_typed
 from ..transforms import StaticTransforms, load_transform_files, quaternion_from_matrix
 from .params import exit_if_help_asked
+from .lifetime import init_node
 
 
 def to_messages(entries: Sequence[Dict], stamp: rospy.Time) -> List[TransformStamped]:
@@ -77,7 +78,7 @@ def simulator_mount_warning(files: Sequence[str]) -> str:
 def main() -> None:
     exit_if_help_asked("static_transforms_node.py", __doc__.split("\n\n")[0] + "\n\n~config: a path or a name in "
                        "config/, or a list of them (default: static_transforms)")
-    rospy.init_node("static_transforms")
+    init_node("static_transforms")
     try:
         files = config_files(rospy.get_param("~config", "static_transforms"))
         entries = load_transform_files(files)

@@ -57,14 +57,14 @@ class SimulatedCamera:
                 self.world.close()
                 raise RuntimeError("PyBullet's EGL renderer plugin could not be loaded (no EGL library?)")
         self.world.add_table(env_cfg.table)
-        self.robot = p.loadURDF(urdf_for_pybullet(), basePosition=[0, 0, 0], useFixedBase=True,
+        self.robot = p.loadURDF(urdf_for_pybullet(env_cfg.robot), basePosition=[0, 0, 0], useFixedBase=True,
                                 physicsClientId=client)
         index = {}
         for joint in range(p.getNumJoints(self.robot, physicsClientId=client)):
             index[p.getJointInfo(self.robot, joint, physicsClientId=client)[1].decode()] = joint
         missing = [name for name in joint_names if name not in index]
         if missing:
-            raise RuntimeError(f"urdf/fr5.urdf lacks joints {missing}")
+            raise RuntimeError(f"urdf/{env_cfg.robot}.urdf lacks joints {missing}; regenerate it with `make meshes`")
         self.joint_index = {name: index[name] for name in joint_names}
         self.width, self.height, self.near, self.far = int(width), int(height), float(near), float(far)
         view = _GL_IN_OPTICAL @ np.linalg.inv(np.asarray(base_from_optical, dtype=float))

@@ -10,7 +10,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import pybullet as p
 
-from ..config import RobotSpec, package_root
+from ..config import RobotSpec, package_root, urdf_path
 from ..env_config import SimulationConfig
 
 
@@ -18,8 +18,10 @@ from ..env_config import SimulationConfig
 _WORLD_ROOT = re.compile(r'^  <link name="world"/>\n|^  <joint name="world_joint" type="fixed">.*\n', re.MULTILINE)
 
 
-def urdf_for_pybullet(urdf_path: Path | None = None) -> str:
-    """Path of a copy of the package URDF that PyBullet can load.
+def urdf_for_pybullet(robot_or_path: str | Path) -> str:
+    """Path of a copy of an arm's URDF that PyBullet can load.
+
+    :param robot_or_path: the arm's name (``urdf/<robot>.urdf``), or a URDF file.
 
     PyBullet does not resolve ``package://fr5_rl/`` mesh URIs, so the copy has them replaced by
     the package root. The massless ``world`` root that robot_state_publisher needs is left out:
@@ -27,12 +29,10 @@ def urdf_for_pybullet(urdf_path: Path | None = None) -> str:
     a content hash.
     """
     root = package_root()
-    urdf_path = urdf_path or root / "urdf" / "fr5.urdf"
-    if not urdf_path.is_file():
-        raise FileNotFoundError(
-            f"{urdf_path} is missing; regenerate it with `python tools/generate_description.py`"
-        )
-    text = urdf_path.read_text(encoding="utf-8").replace("package://fr5_rl/", f"{root}/")
+    path = Path(robot_or_path) if isinstance(robot_or_path, Path) else urdf_path(robot_or_path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} is missing; regenerate it with `make meshes`")
+    text = path.read_text(encoding="utf-8").replace("package://fr5_rl/", f"{root}/")
     text = _WORLD_ROOT.sub("", text)
     digest = hashlib.sha1(text.encode("utf-8")).hexdigest()[:16]
     resolved = Path(tempfile.gettempdir()) / f"fr5_rl_{digest}.urdf"
@@ -77,7 +77,7 @@ class FR5Robot:
         self.client = client
         self.spec = robot
         self.body = p.loadURDF(
-            urdf_for_pybullet(), basePosition=[0, 0, 0], useFixedBase=True,
+            urdf_for_pybullet(robot.model), basePosition=[0, 0, 0], useFixedBase=True,
             flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client,
         )
         joint_index: Dict[str, int] = {}
@@ -91,7 +91,8 @@ class FR5Robot:
             self.finger_joints = [joint_index[name] for name in robot.finger_joint_names]
             self.tcp_link = link_index[robot.tcp_frame]
         except KeyError as missing:
-            raise RuntimeError(f"urdf/fr5.urdf lacks joint or link {missing}; regenerate it") from None
+            raise RuntimeError(f"urdf/{robot.model}.urdf lacks joint or link {missing}; regenerate it "
+                               "with `make meshes`") from None
         self.all_joints = self.arm_joints + self.finger_joints
         self.link_index = link_index
         self.finger_links = {index for index in self.finger_joints}

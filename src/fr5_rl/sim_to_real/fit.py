@@ -16,7 +16,7 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from ..config import whole_multiple
+from ..config import DEFAULT_ROBOT, whole_multiple
 from ..sim.driver_profile import DriverProfile
 from .recording import RecordingError, RunRecording
 from .replay import Replay, Replayer, summary, tracking_errors
@@ -120,12 +120,13 @@ def fit_response(replayer: Replayer, recording: RunRecording, candidate: DriverP
 
 
 def fit_driver(recording: RunRecording, base: DriverProfile, settings: FitSettings, task: str = "reach",
-               progress: Optional[Any] = None) -> FitResult:
+               progress: Optional[Any] = None, robot: str = DEFAULT_ROBOT) -> FitResult:
     """Fit ``base``'s driver model to ``recording``.
 
     :param base: the profile whose other keys (topics, physics step, state rate) the fitted one
         keeps.
     :param progress: called with a line per candidate, if given.
+    :param robot: the arm that made the run (``config/robots/``).
     :raises RecordingError: the run is too short (:func:`check_fittable`).
     """
     check_fittable(recording, settings)
@@ -134,7 +135,7 @@ def fit_driver(recording: RunRecording, base: DriverProfile, settings: FitSettin
     dt = base.physics_dt
     rates = sorted({float(rate) for rate in [base.servo_rate, *settings.servo_rates]
                     if rate > 0 and rate * dt <= 1.0 + 1e-9 and whole_multiple(1.0 / rate, dt) is not None})
-    replayer = Replayer(task, dt)
+    replayer = Replayer(task, dt, robot)
     candidates: List[Dict[str, Any]] = []
     try:
         for rate in rates:

@@ -14,7 +14,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..config import load_robot_spec, load_yaml, whole_multiple
+from ..config import DEFAULT_ROBOT, load_yaml, whole_multiple
 from ..envs import FR5Env
 from ..sim.driver_profile import DriverProfile
 from ..sim.servo import FirstOrderResponse, ServoCycle
@@ -88,14 +88,15 @@ class Replayer:
 
     :param task: the environment whose scene the arm moves in (reach | grasp).
     :param physics_dt: s, the physics step (the profile's).
+    :param robot: the arm that made the run (``config/robots/``).
     """
 
-    def __init__(self, task: str, physics_dt: float) -> None:
+    def __init__(self, task: str, physics_dt: float, robot: str = DEFAULT_ROBOT) -> None:
         settings = load_yaml("sim_node")
         self.physics_dt = float(physics_dt)
-        self.env = FR5Env(task=task, config={task: {"simulation": {
+        self.env = FR5Env(task=task, robot=robot, config={task: {"simulation": {
             "physics_dt": self.physics_dt, "solver_iterations": int(settings["solver_iterations"])}}})
-        self.spec = load_robot_spec()
+        self.spec = self.env.robot_spec
 
     def close(self) -> None:
         self.env.close()
@@ -173,14 +174,16 @@ def summary(errors: np.ndarray, joint_names: Sequence[str]) -> Dict[str, Any]:
 
 
 def replay_error(recording: RunRecording, profile: DriverProfile, task: str = "reach",
-                 phases: Optional[Sequence[int]] = None) -> Dict[str, Any]:
+                 phases: Optional[Sequence[int]] = None, robot: str = DEFAULT_ROBOT) -> Dict[str, Any]:
     """A profile's replay error on a run, at the servo phase that fits best (the recording does
     not say where the driver's cycle boundaries fell).
+
+    :param robot: the arm that made the run.
 
     :return: :func:`summary` plus ``phase_steps`` and the replay.
     """
     steps_per_cycle = (whole_multiple(profile.servo_period, profile.physics_dt) or 1) if profile.servo_rate > 0 else 1
-    replayer = Replayer(task, profile.physics_dt)
+    replayer = Replayer(task, profile.physics_dt, robot)
     best: Optional[Dict[str, Any]] = None
     try:
         for phase in (phases if phases is not None else range(steps_per_cycle)):

@@ -19,7 +19,7 @@ from typing import Any, Dict, List, Tuple
 
 import numpy as np
 
-from ..config import load_typed, load_yaml
+from ..config import load_typed
 from ..deploy.bundle import build_meta, machine_description, save_model_dir, write_json_atomic
 from .hyperparameters import DaggerConfig
 from .run_settings import DaggerRun
@@ -156,7 +156,7 @@ def run_dagger(run: DaggerRun) -> int:
     rounds = run.rounds if run.rounds is not None else dagger.rounds
     episodes = run.episodes or dagger.episodes
     epochs = run.epochs or dagger.epochs
-    env_overrides = config.env
+    env_overrides = {**config.env, "robot": run.robot} if run.robot else config.env
     run_dir = run.run_dir or Path("runs") / f"{run.task}_dagger_{time.strftime('%Y%m%d-%H%M%S')}"
     run_dir.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(run.seed)
@@ -185,7 +185,7 @@ def run_dagger(run: DaggerRun) -> int:
                  for name, e in eval_envs.items()}
         success = sum(rates.values()) / len(rates)
         sync_stats(venv, normaliser)
-        meta = build_meta(run.task, "ppo", env_overrides, env.cfg, load_yaml("robot"), env.observation_space.shape[0],
+        meta = build_meta(run.task, "ppo", env_overrides, env.cfg, env.observation_space.shape[0],
                           env.action_space.shape[0], env.control_dt, run.seed, trained_by="dagger",
                           num_timesteps=int(len(observations)), dagger_round=round_index)
         if success > best[0]:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import AbstractSet, Any, Dict, Mapping, Optional
 
-from ..config import ConfigError
+from ..config import ConfigError, check_robot_name
 
 CONFIG_FILE = "config.json"  # in the run directory: what --resume continues
 
@@ -73,6 +73,9 @@ class TrainRun:
         name in ``config/``) whose servo delay, state age, physics step and response the
         perturbed episodes draw (:meth:`fr5_rl.sim.driver_profile.DriverProfile.env_randomisation`),
         over the hyperparameter file's; None: the file's own.
+    :param robot: the arm to train for (``config/robots/<robot>.yaml``), over the hyperparameter
+        file's ``env.robot``; None: the file's, else env.yaml's (``fr5``). A resumed run keeps its own.
+    :param force: a new run may replace what ``run_dir`` holds (without it, an existing run refuses).
     """
 
     task: str = "reach"
@@ -97,6 +100,8 @@ class TrainRun:
     progress: bool = True
     torch_threads: int = 1
     driver_profile: Optional[str] = None
+    robot: Optional[str] = None
+    force: bool = False
 
     def check(self) -> None:
         """Refuse values no run can use.
@@ -112,6 +117,8 @@ class TrainRun:
             raise ConfigError(f"--eval-envs must be at least 1, got {self.eval_envs}")
         if not 0.0 <= float(self.eval_min_training_success) <= 1.0:
             raise ConfigError(f"--eval-min-training-success must be in [0, 1], got {self.eval_min_training_success}")
+        if self.robot is not None:
+            check_robot_name(self.robot)
 
     def resumed(self, saved: Mapping[str, Any], typed_again: AbstractSet[str] = frozenset()) -> "TrainRun":
         """These settings merged with a run's saved ``config.json`` (:func:`read_run_config`), for
@@ -152,7 +159,9 @@ class TrainRun:
                 "target_success": self.target_success,
                 "eval_min_training_success": float(self.eval_min_training_success),
                 # a record only: the profile's randomisation is in hyperparams_resolved, which a resume reads
-                "driver_profile": self.driver_profile, **extra}
+                "driver_profile": self.driver_profile,
+                # a record only: the arm is in hyperparams_resolved's env, which a resume reads
+                "robot": self.robot, **extra}
 
 
 # config.json keys that differ from the field's name (kept as they were: older runs resume too)
@@ -187,6 +196,7 @@ class DaggerRun:
     :param epochs: fitting epochs per round; None (or 0): the file's ``dagger.epochs``.
     :param eval_episodes: evaluation episodes per round (and per evaluated environment).
     :param torch_threads: threads of torch's CPU operations.
+    :param robot: the arm (``config/robots/``), over the DAgger file's ``env.robot``; None: the file's, else fr5.
     """
 
     task: str = "grasp"
@@ -198,3 +208,4 @@ class DaggerRun:
     epochs: Optional[int] = None
     eval_episodes: int = 50
     torch_threads: int = 1
+    robot: Optional[str] = None

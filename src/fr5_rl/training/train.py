@@ -13,13 +13,14 @@ import copy
 import dataclasses
 import json
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 
-from ..config import ConfigError, load_yaml, typed
+from ..config import DEFAULT_ROBOT, ConfigError, typed
 from ..deploy.bundle import (MODEL_FILE, STATS_FILE, ModelFilesError, algorithm_class, build_meta,
                               check_files_present, check_sb3_zip, damaged, machine_description, read_meta,
                               recover_model_dir, save_model_dir, write_json_atomic)
@@ -330,16 +331,27 @@ def train(run: TrainRun, t_start: Optional[float] = None,
             raise ConfigError(f"{source}: the run's {differ[0]} is {saved.get(differ[0])!r}, these settings' "
                               f"{getattr(run, differ[0])!r}; merge them with TrainRun.resumed() to resume it")
         hyper = typed(Hyperparameters, saved["hyperparams_resolved"], f"{source}: hyperparams_resolved")
+        trained_for = hyper.env.get("robot", DEFAULT_ROBOT)
+        if run.robot is not None and run.robot != trained_for:
+            raise ConfigError(f"{source}: the run trains for the {trained_for}, not the {run.robot}: resume it "
+                              "without --robot, or start a new run")
     else:
         source = str(hyperparameter_source(run.algo, run.task, run.hyperparams))
         hyper = load_hyperparameters(run.algo, run.task, run.hyperparams)
         if run.driver_profile:
             hyper = with_driver_profile(hyper, run.driver_profile, source)
+        if run.robot is not None:
+            hyper = dataclasses.replace(hyper, env={**hyper.env, "robot": run.robot})
         run = dataclasses.replace(
             run, n_envs=run.n_envs or hyper.n_envs, timesteps=int(run.timesteps or hyper.n_timesteps),
             run_dir=run.run_dir if run.run_dir is not None
             else Path("runs") / f"{run.task}_{run.algo}_{time.strftime('%Y%m%d-%H%M%S')}")
     run.check()
+    if not run.resume and Path(run.run_dir).is_dir() and any(Path(run.run_dir).iterdir()):
+        if not run.force:
+            raise ConfigError(f"{run.run_dir} holds a run already: continue it with --resume --run-dir {run.run_dir}, "
+                              "pick a new --run-dir (or leave it out for a fresh one), or pass --force to replace it")
+        shutil.rmtree(run.run_dir)  # --force: nothing of the old run mixes into the new one
     for warning in check_hyperparameters(run.algo, hyper, run.n_envs, source):
         print(f"train.py: warning: {warning}", file=sys.stderr)
     if run.subprocess and run.start_method == "forkserver" and (run.processes or available_cores()) > 1:
@@ -364,7 +376,7 @@ def train(run: TrainRun, t_start: Optional[float] = None,
 
     env_overrides = hyper.env
     probe = FR5Env(task=run.task, config=env_overrides)
-    meta = build_meta(run.task, run.algo, env_overrides, probe.cfg, load_yaml("robot"),
+    meta = build_meta(run.task, run.algo, env_overrides, probe.cfg,
                       probe.observation_space.shape[0], probe.action_space.shape[0], probe.control_dt,
                       run.seed, n_envs=run.n_envs, trained_by="rl")
     probe.close()
@@ -445,4 +457,9 @@ def train(run: TrainRun, t_start: Optional[float] = None,
     close_vec_env(eval_env, interrupted)
     print(f"train.py: {'stopped' if interrupted else 'done'} at {model.num_timesteps} steps; "
           f"run directory {run_dir}")
+    if interrupted:
+        print(f"train.py: continue it with: rosrun fr5_rl train.py --resume --run-dir {run_dir}")
+    else:
+        print(f"train.py: the model is {run_dir / 'final'} (the best evaluated: {run_dir / 'best'}); evaluate it with: "
+              f"rosrun fr5_rl evaluate.py {run_dir / 'final'}")
     return 130 if interrupted else 0

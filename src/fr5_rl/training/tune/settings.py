@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, Optional
 
-from ...config import ConfigError, typed
+from ...config import ConfigError, check_robot_name, typed
 from ..hyperparameters import Hyperparameters
 from .search_space import SearchFile, load_search_file, trial_hyperparameters, trial_processes
 
@@ -53,13 +53,14 @@ class ExperimentSettings:
 def build_settings(task: str, algo: str, samples: int, search: str, scheduler: str, out: Path,
                    space_path: Optional[str | Path] = None, max_timesteps: Optional[int] = None,
                    n_envs: Optional[int] = None, seed: int = 0, storage: Optional[str] = None,
-                   processes: Optional[int] = None) -> ExperimentSettings:
+                   processes: Optional[int] = None, robot: Optional[str] = None) -> ExperimentSettings:
     """Read the search and hyperparameter files and resolve the per-trial budget.
 
     :param max_timesteps: caps each trial's ``timesteps`` (smoke runs); evaluations (= reports)
         then come at most every ``max_timesteps / 2`` steps so that a trial reports at least twice.
     :param n_envs: overrides the search file's ``trial.n_envs``.
     :param processes: overrides the search file's ``trial.processes`` (see :func:`trial_processes`).
+    :param robot: the arm every trial trains for, over the base file's ``env.robot``.
     :param storage: Tune's storage (a path on a file system every node sees, or a URI such as
         ``s3://bucket/dir``); default ``out`` itself.
     :raises ConfigError: a bad file, or hyperparameters that fail train.py's checks.
@@ -70,6 +71,8 @@ def build_settings(task: str, algo: str, samples: int, search: str, scheduler: s
         raise ConfigError("--samples must be at least 1")
     spec = load_search_file(algo, task, space_path)
     base = load_hyperparameters(algo, task, spec.base).to_dict()
+    if robot is not None:
+        base["env"] = {**base.get("env", {}), "robot": check_robot_name(robot)}
     timesteps = min(spec.trial.timesteps, max_timesteps) if max_timesteps else spec.trial.timesteps
     eval_freq = min(spec.trial.eval_freq, max(timesteps // 2, 1))
     n_envs = n_envs or spec.trial.n_envs

@@ -1,0 +1,85 @@
+"""What a newcomer does wrong in the first hour is refused in one line, and loses nothing
+(issue #51): the model decides its task and arm, nothing is written over a shipped model or a run
+without --force, a run directory given as a model names the model inside it."""
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from fr5_rl.deploy.bundle import ModelFilesError, task_and_arm
+from fr5_rl.deploy.policy import load_policy
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def one_line(text: str) -> str:
+    lines = [line for line in text.splitlines() if line.strip()]
+    assert len(lines) == 1, text
+    return lines[0]
+
+
+def test_the_model_decides_the_task_and_a_contradicting_one_refuses():
+    meta = json.loads((REPO / "models" / "grasp" / "meta.json").read_text())
+    assert task_and_arm("models/grasp") == (meta["task"], meta["robot"])
+    assert task_and_arm("models/grasp", "grasp") == ("grasp", meta["robot"])
+    with pytest.raises(ModelFilesError, match="trained on 'grasp', not 'reach'"):
+        task_and_arm("models/grasp", "reach")
+    assert task_and_arm(None) == ("reach", "fr5")
+
+
+def test_evaluate_refuses_a_model_together_with_the_expert(capsys, tmp_path, monkeypatch):
+    from fr5_rl.cli.evaluate import main
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exit_:
+        main(["models/reach", "--expert", "grasp", "--episodes", "1"])
+    assert exit_.value.code == 2 and "not both" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_evaluate_writes_beside_the_caller_not_into_the_model(tmp_path, monkeypatch):
+    from fr5_rl.cli.evaluate import main
+
+    model = tmp_path / "models" / "reach"
+    shutil.copytree(REPO / "models" / "reach", model)
+    before = {path.name: path.read_bytes() for path in model.iterdir()}
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    assert main([str(model), "--episodes", "2", "--no-map"]) == 0
+    assert {path.name: path.read_bytes() for path in model.iterdir()} == before
+    assert json.loads((work / "eval_reach.json").read_text())["episodes"] == 2
+    assert (work / "eval_reach.csv").is_file()
+
+
+def test_evaluate_refuses_to_replace_a_models_result_without_force(capsys, tmp_path):
+    from fr5_rl.cli.evaluate import main
+
+    model = tmp_path / "reach"
+    shutil.copytree(REPO / "models" / "reach", model)
+    shipped = (model / "eval.json").read_bytes()
+    assert main([str(model), "--episodes", "2", "--no-map", "--out", str(model / "eval.json")]) == 2
+    assert "--force" in one_line(capsys.readouterr().err)
+    assert (model / "eval.json").read_bytes() == shipped
+    assert main([str(model), "--episodes", "2", "--no-map", "--out", str(model / "eval.json"), "--force"]) == 0
+    assert json.loads((model / "eval.json").read_text())["episodes"] == 2
+
+
+def test_a_training_run_given_as_a_model_names_the_model_inside_it(tmp_path):
+    run = tmp_path / "runs" / "reach_ppo"
+    shutil.copytree(REPO / "models" / "reach", run / "final")
+    with pytest.raises(ModelFilesError, match=f"{run} is a training run, not a model: its model is {run / 'final'}"):
+        load_policy(run, "onnx")
+
+
+def test_train_refuses_a_run_directory_that_holds_a_run(capsys, tmp_path):
+    from fr5_rl.cli.train import main
+
+    run = tmp_path / "run"
+    (run / "final").mkdir(parents=True)
+    (run / "config.json").write_text("{}")
+    assert main(["--task", "reach", "--run-dir", str(run), "--timesteps", "64", "--no-progress"]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert "--resume" in line and "--force" in line and "new --run-dir" in line
+    assert sorted(path.name for path in run.iterdir()) == ["config.json", "final"]
