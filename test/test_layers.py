@@ -67,7 +67,7 @@ ALLOWED = {
     "shared": {"shared"},
 }
 SHARED = {"config", "env_config", "kinematics", "observation", "control", "transforms", "gripper", "motion_guard",
-          "fr5_rl"}
+          "help_text", "fr5_rl"}
 
 
 def kind(module: str) -> str:

@@ -83,3 +83,34 @@ def test_train_refuses_a_run_directory_that_holds_a_run(capsys, tmp_path):
     line = one_line(capsys.readouterr().err)
     assert "--resume" in line and "--force" in line and "new --run-dir" in line
     assert sorted(path.name for path in run.iterdir()) == ["config.json", "final"]
+
+
+def test_a_saved_model_directory_is_an_ordinary_one_not_private(tmp_path):
+    import os
+
+    from fr5_rl.deploy.bundle import save_model_dir
+
+    class Saved:
+        def save(self, path):
+            Path(path).write_text("weights")
+
+    save_model_dir(tmp_path / "final", Saved(), Saved(), {"task": "reach"})
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (tmp_path / "final").stat().st_mode & 0o777 == 0o777 & ~umask
+
+
+@pytest.mark.parametrize("module", ["train", "evaluate", "imitate", "tune", "export_onnx", "compare_run", "fit_driver"])
+def test_help_is_plain_text(module, capsys):
+    """--help shows no reStructuredText markup (the docstrings' ``code`` and :class:`roles`)."""
+    import importlib
+
+    parser = importlib.import_module(f"fr5_rl.cli.{module}").build_parser()
+    text = parser.format_help()
+    assert "`" not in text and ":class:" not in text, text
+
+
+def test_plain_keeps_the_text_of_literals_and_roles():
+    from fr5_rl.help_text import plain
+
+    assert plain("``rosrun x`` and :class:`~fr5_rl.envs.FR5Env` or :func:`load` `a`") == "rosrun x and FR5Env or load a"

@@ -87,7 +87,8 @@ def test_intact_copy_loads_with_both_backends(tmp_path):
     """The damage above is what fails: the undamaged copy loads and acts."""
     model = copy_model(tmp_path)
     for backend in ("torch", "onnx"):
-        action = load_policy(model, backend).act(np.zeros(23, dtype=np.float32))
+        policy = load_policy(model, backend)
+        action = policy.act(np.zeros(policy.observation_size, dtype=np.float32))
         assert action.shape == (7,)
 
 
@@ -141,7 +142,7 @@ sys.addaudithook(hook)
 import numpy as np
 from fr5_rl.deploy.policy import load_policy
 policy = load_policy({str(model)!r}, "onnx")
-action = policy.act(np.zeros(23, dtype=np.float32))
+action = policy.act(np.zeros(policy.observation_size, dtype=np.float32))
 assert action.shape == (7,)
 read = sorted(p for p in opened if p.startswith({str(model)!r}))
 print(read)

@@ -7,6 +7,8 @@ import argparse
 import sys
 from typing import List, Optional
 
+from ..help_text import plain
+
 
 def script_args(argv: Optional[List[str]]) -> List[str]:
     """``argv``, or the command line without the ``__name:=`` / ``__log:=`` arguments roslaunch adds."""
@@ -22,6 +24,6 @@ def fail(program: str, error: BaseException) -> int:
 def parser_from_doc(program: str, doc: str) -> argparse.ArgumentParser:
     """An argument parser whose description is ``doc``'s first paragraph and whose epilog is the
     rest (examples keep their layout)."""
-    return argparse.ArgumentParser(prog=program, description=doc.split("\n\n")[0].strip("`"),
-                                   epilog=doc.split("\n\n", 1)[1] if "\n\n" in doc else None,
+    return argparse.ArgumentParser(prog=program, description=plain(doc.split("\n\n")[0]),
+                                   epilog=plain(doc.split("\n\n", 1)[1]) if "\n\n" in doc else None,
                                    formatter_class=argparse.RawDescriptionHelpFormatter)

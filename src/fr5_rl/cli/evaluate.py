@@ -18,12 +18,13 @@ from typing import Any, Dict, List, Optional
 from ..config import ConfigError, robot_names
 from ..deploy.bundle import META_FILE, ModelFilesError
 from ..training.evaluation import HELD_OUT_SEED_START
+from ..help_text import plain
 from . import fail, script_args
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="evaluate.py", description=__doc__.split("\n\n")[0].strip("`"),
-                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser = argparse.ArgumentParser(prog="evaluate.py", description=plain(__doc__.split("\n\n")[0]),
+                                     epilog=plain(__doc__.split("\n\n", 1)[1]))
     parser.add_argument("model_dir", type=Path, nargs="?", help="model directory (meta.json + the backend's files)")
     parser.add_argument("--expert", choices=["reach", "grasp"], help="evaluate the scripted expert on this task")
     parser.add_argument("--robot", choices=robot_names(), default=None,
@@ -127,6 +128,8 @@ def evaluate(args: argparse.Namespace) -> int:
         print(f"evaluated on Ray: {len(nodes)} tasks on {len(set(nodes))} nodes")
     else:
         records = run_episodes(task, overrides, make_actor, seeds, gif_path=args.gif)
+        if args.gif:
+            print(f"wrote {args.gif}")
     summary = summarise(records)
     summary.update({"policy": label, "task": task, "backend": args.backend if not args.expert else "expert",
                     "deterministic": True, "seeds": [seeds[0], seeds[-1]], "env_overrides": overrides,

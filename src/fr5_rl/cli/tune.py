@@ -23,12 +23,13 @@ from typing import List, Optional
 
 from ..config import ConfigError, robot_names
 from ..deploy.bundle import ModelFilesError
+from ..help_text import plain
 from . import fail, script_args
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="tune.py", description=__doc__.split("\n\n")[0].strip("`"),
-                                     epilog=__doc__.split("\n\n", 1)[1],
+    parser = argparse.ArgumentParser(prog="tune.py", description=plain(__doc__.split("\n\n")[0]),
+                                     epilog=plain(__doc__.split("\n\n", 1)[1]),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--task", choices=["reach", "grasp"], default="reach")
     parser.add_argument("--algo", choices=["ppo", "sac", "td3", "tqc"], default="ppo")

@@ -162,6 +162,9 @@ def _save_model_dir(directory: Path, model, vec_normalize, meta: Mapping[str, An
                     write_extra: Optional[Callable[[Path], None]]) -> Path:
     directory.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(dir=directory.parent, prefix=f".{directory.name}."))
+    umask = os.umask(0)
+    os.umask(umask)
+    staging.chmod(0o777 & ~umask)  # mkdtemp makes it private; a model directory is an ordinary one
     try:
         model.save(staging / MODEL_FILE)
         vec_normalize.save(str(staging / STATS_FILE))

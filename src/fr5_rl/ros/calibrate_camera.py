@@ -35,6 +35,7 @@ from typing import Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from ..help_text import plain
 from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec, robot_names
 from .calibration_motion import CalibrationMove, calibration_poses
 from .robot_description import robot_name
@@ -376,9 +377,9 @@ def observations_live(calibration: Calibration, count: int, joint_states_topic: 
 
 # ---------------------------------------------------------------------------- command line
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="calibrate_camera.py", description=__doc__.split("\n\n")[0],
+    parser = argparse.ArgumentParser(prog="calibrate_camera.py", description=plain(__doc__.split("\n\n")[0]),
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n\n".join(__doc__.split("\n\n")[1:]))
+                                     epilog=plain("\n\n".join(__doc__.split("\n\n")[1:])))
     parser.add_argument("--out", required=True, help="the transforms file to write (static_transforms.yaml's format)")
     parser.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     parser.add_argument("--bag", help="solve from this recording instead of moving the arm")

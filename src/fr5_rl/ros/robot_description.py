@@ -18,6 +18,7 @@ import sys
 import xml.etree.ElementTree as ET
 from typing import List, Optional, Tuple
 
+from ..help_text import plain
 from ..config import ConfigError, load_robot_spec, urdf_path
 from ..deploy.bundle import ModelFilesError, arm_of
 
@@ -104,8 +105,8 @@ def subtree_description(urdf: str, root: str, attach_to: Optional[str] = None) -
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="robot_description.py", description=__doc__.split("\n\n")[0],
-                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser = argparse.ArgumentParser(prog="robot_description.py", description=plain(__doc__.split("\n\n")[0]),
+                                     epilog=plain(__doc__.split("\n\n", 1)[1]))
     parser.add_argument("--robot", default="", help="the arm (config/robots/); default: the model's, else fr5")
     parser.add_argument("--model", default="", metavar="DIR", help="a model directory: its meta.json names its arm")
     mode = parser.add_mutually_exclusive_group()

@@ -42,6 +42,8 @@ from :class:`fr5_rl.envs.FR5Env`'s public API.
 from __future__ import annotations
 
 import json
+import os
+import signal
 import threading
 import time
 from collections import deque
@@ -108,6 +110,7 @@ class SimNodeParams:
     lockstep_command_timeout: float
     lockstep_gripper: bool
     policy_reset_service: str
+    policy_enable_service: str
     episode_start: str
     outcome_log: str
 
@@ -248,6 +251,23 @@ class SimulatorNode:
                 self._start_episode()
 
     # ------------------------------------------------------------------ real time
+    def end_of_run(self) -> None:
+        """After the last episode: pause the policy (it would hold, warning of stale joint states,
+        once the simulator has gone) and end the launch that started this node as a finished run,
+        not as a required node that died (roslaunch's red banner). Under rostest the test ends it."""
+        if self.params.policy_enable_service:
+            try:
+                rospy.wait_for_service(self.params.policy_enable_service, timeout=1.0)
+                rospy.ServiceProxy(self.params.policy_enable_service, SetBool)(False)
+            except (rospy.ServiceException, rospy.ROSException):
+                pass  # no policy node, or it has gone: nothing to pause
+        try:
+            parent = Path(f"/proc/{os.getppid()}/cmdline").read_bytes().split(b"\0")
+        except OSError:
+            return
+        if any(part.endswith(b"roslaunch") for part in parent[:2]):
+            os.kill(os.getppid(), signal.SIGINT)
+
     def spin(self) -> None:
         """Step physics and publish until shutdown or the last episode, then print the result."""
         if self.params.lockstep:
@@ -643,5 +663,6 @@ def main() -> int:
     node.spin()
     node.env.close()
     if not rospy.is_shutdown():
+        node.end_of_run()
         rospy.signal_shutdown("all episodes done")
     return 0

@@ -1,1 +1,1 @@
-"""PyBullet layer: the world (client, table, object) and the FR5 robot in it."""
+"""PyBullet layer: the world (client, table, object) and the arm in it."""

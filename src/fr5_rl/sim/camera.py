@@ -11,7 +11,7 @@ import pkgutil
 from typing import Mapping, Optional, Sequence, Tuple
 
 import numpy as np
-import pybullet as p
+from .bullet import p
 
 from ..env_config import EnvConfig
 from .robot import urdf_for_pybullet

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
-import pybullet as p
+from .bullet import p
 
 from ..transforms import quaternion_from_matrix
 

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
-import pybullet as p
+from .bullet import p
 
 from ..config import RobotSpec, package_root, urdf_path
 from ..env_config import SimulationConfig

@@ -8,7 +8,7 @@ import os
 from typing import Optional, Sequence, Tuple
 
 import numpy as np
-import pybullet as p
+from .bullet import p
 
 from ..env_config import SimulationConfig, TableConfig
 
