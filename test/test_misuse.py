@@ -114,3 +114,21 @@ def test_plain_keeps_the_text_of_literals_and_roles():
     from fr5_rl.help_text import plain
 
     assert plain("``rosrun x`` and :class:`~fr5_rl.envs.FR5Env` or :func:`load` `a`") == "rosrun x and FR5Env or load a"
+
+
+@pytest.mark.slow  # roslaunch
+@pytest.mark.parametrize("arguments, reason", [
+    (["model:=/nonexistent"], "no such model directory: /nonexistent"),
+    (["model:=models/reach", "robot:=fr10"], "not the fr10"),
+])
+def test_a_launch_that_cannot_work_stops_at_once_with_its_reason(tmp_path, arguments, reason):
+    """Before any node or master starts: the model's arm is read for robot_description."""
+    import os
+    import subprocess
+
+    env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:11598", ROS_LOG_DIR=str(tmp_path))
+    result = subprocess.run(["roslaunch", "-p", "11598", "fr5_rl", "sim_policy.launch", "rviz:=false", *arguments],
+                            capture_output=True, text=True, timeout=60, env=env, cwd=tmp_path)
+    assert result.returncode != 0
+    assert reason in result.stdout + result.stderr
+    assert "started with pid" not in result.stdout  # nothing was started
