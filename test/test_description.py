@@ -56,7 +56,8 @@ J3_LIMIT = {"fr3": math.radians(150)}
 SLOW_JOINTS = {"fr10": 2, "fr16": 2, "fr20": 3, "fr30": 3}  # j1..jN at 120 deg/s, the rest 180 deg/s
 FAMILY = list(FAMILY_DH)
 
-# The legacy FR5 file (frcobot_ros fr5_robot.urdf, 2023): joint, parent, child, xyz, rpy
+# The legacy FR5 file (frcobot_ros fr5_robot.urdf, 2023), which this package modelled until 2026-11
+# and no arm matches: joint, parent, child, xyz, rpy. Only to measure how far it was from the arm.
 LEGACY_JOINTS: List[Tuple[str, str, str, Tuple[float, ...], Tuple[float, ...]]] = [
     ("j1", "base_link", "shoulder_Link", (0, 0, 0), (0, 0, 0)),
     ("j2", "shoulder_Link", "upperarm_Link", (0, 0, 0.155), (1.570796, -1.570796, 0)),
@@ -65,7 +66,6 @@ LEGACY_JOINTS: List[Tuple[str, str, str, Tuple[float, ...], Tuple[float, ...]]] 
     ("j5", "wrist1_Link", "wrist2_Link", (0, 0, 0.13), (1.570796, 0, -1.570796)),
     ("j6", "wrist2_Link", "wrist3_Link", (0, 0, 0.102), (-1.570796, 2.268928, 0)),
 ]
-LEGACY_MASSES = (1.62, 4.38, 14.46, 7.67, 1.63, 1.58, 0.53)
 
 # PGI-140-80: 0-40 mm per finger; the tcp 0.17 m beyond the flange face (the legacy file: beyond
 # wrist3_Link, the wrist centre).
@@ -73,14 +73,11 @@ FINGER_JOINTS = ("finger_left_joint", "finger_right_joint")
 FINGER_TRAVEL = 0.04
 TCP_OFFSET = 0.17
 HOME = (0.0, -1.570796, 1.570796, -1.570796, -1.570796, 0.0)
-ROBOTS = FAMILY + ["fr5_legacy"]
+ROBOTS = FAMILY
 
 
 def limits(robot: str) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lower, upper (rad) and speed (rad/s) limits of ``robot`` from the published numbers."""
-    if robot == "fr5_legacy":
-        return (np.array([-3.0543, -4.6251, -2.8274, -4.6251, -3.0543, -3.0543]),
-                np.array([3.0543, 1.4835, 2.8274, 1.4835, 3.0543, 3.0543]), np.array([3.15] * 3 + [3.2] * 3))
     j3 = J3_LIMIT.get(robot, math.radians(160))
     slow = SLOW_JOINTS.get(robot, 0)
     speeds = np.array([math.radians(120) if i < slow else math.radians(180) for i in range(6)])
@@ -184,10 +181,6 @@ def floats(text: str) -> List[float]:
     return [float(v) for v in text.split()]
 
 
-def flange_link(name: str) -> str:
-    return "wrist3_Link" if name == "fr5_legacy" else "flange"
-
-
 # ----------------------------------------------------------------- structure
 @pytest.mark.parametrize("name", ROBOTS)
 def test_check_urdf_accepts_it(name: str) -> None:
@@ -203,13 +196,13 @@ def test_arm_joints_are_the_published_chain_and_limits(arm) -> None:
     assert root.get("name") == name
     joints = {j.get("name"): j for j in root.findall("joint")}
     lower, upper, speed = limits(name)
-    if name == "fr5_legacy":
-        table = [(xyz, rpy) for _, _, _, xyz, rpy in LEGACY_JOINTS]
-    else:  # the vendor's v6 layout of the DH table
-        d1, a2, a3, d4, d5, _ = FAMILY_DH[name]
-        h = math.pi / 2
-        table = [((0, 0, 0), (0, 0, 0)), ((0, 0, d1), (h, 0, 0)), ((a2, 0, 0), (0, 0, 0)),
-                 ((a3, 0, 0), (0, 0, 0)), ((0, 0, d4), (h, 0, 0)), ((0, 0, d5), (-h, 0, 0))]
+    # The vendor's v6 layout of the DH table (frcobot_ros fr5v6.urdf: j2 at z 0.152, rpy (1.5708, 0,
+    # 0); j3 at x -0.425; j4 at x -0.39501; j5 at z 0.1021, rpy (1.5708, 0, 0); j6 at z 0.102, rpy
+    # (-1.5708, 0, 0); its fixed joint "tool" 0.1 further along z, rpy 0: our flange).
+    d1, a2, a3, d4, d5, _ = FAMILY_DH[name]
+    h = math.pi / 2
+    table = [((0, 0, 0), (0, 0, 0)), ((0, 0, d1), (h, 0, 0)), ((a2, 0, 0), (0, 0, 0)),
+             ((a3, 0, 0), (0, 0, 0)), ((0, 0, d4), (h, 0, 0)), ((0, 0, d5), (-h, 0, 0))]
     for i, (joint, (xyz, rpy)) in enumerate(zip(ARM_JOINTS, table)):
         j = joints[joint]
         assert j.get("type") == "revolute"
@@ -228,13 +221,12 @@ def test_arm_joints_are_the_published_chain_and_limits(arm) -> None:
 def test_gripper_and_tcp_joints(arm) -> None:
     name, root, _, _ = arm
     joints = {j.get("name"): j for j in root.findall("joint")}
-    flange = flange_link(name)
-    if name != "fr5_legacy":  # the flange face d6 beyond the wrist centre, as the vendor's tool joint
-        fj = joints["flange_joint"]
-        assert fj.get("type") == "fixed" and fj.find("parent").get("link") == "wrist3_Link"
-        assert fj.find("child").get("link") == "flange"
-        assert np.allclose(floats(fj.find("origin").get("xyz")), (0, 0, FAMILY_DH[name][5]), atol=1e-12)
-        assert np.allclose(floats(fj.find("origin").get("rpy")), (0, 0, 0), atol=1e-12)
+    flange = "flange"  # the flange face d6 beyond the wrist centre, as the vendor's tool joint
+    fj = joints["flange_joint"]
+    assert fj.get("type") == "fixed" and fj.find("parent").get("link") == "wrist3_Link"
+    assert fj.find("child").get("link") == "flange"
+    assert np.allclose(floats(fj.find("origin").get("xyz")), (0, 0, FAMILY_DH[name][5]), atol=1e-12)
+    assert np.allclose(floats(fj.find("origin").get("rpy")), (0, 0, 0), atol=1e-12)
     mount = joints["gripper_mount"]
     assert mount.get("type") == "fixed"
     assert mount.find("parent").get("link") == flange
@@ -299,7 +291,7 @@ def test_pybullet_joints_and_masses(arm) -> None:
         info = p.getJointInfo(robot.body, robot.joint[joint], physicsClientId=robot.cid)
         assert info[2] == p.JOINT_PRISMATIC
         assert (info[8], info[9]) == pytest.approx((0.0, FINGER_TRAVEL))
-    masses = LEGACY_MASSES[1:] if name == "fr5_legacy" else LINK_MASSES[name]
+    masses = LINK_MASSES[name]
     for link, mass in zip(ARM_LINKS[1:], masses):
         assert p.getDynamicsInfo(robot.body, robot.link[link], physicsClientId=robot.cid)[0] == pytest.approx(mass)
     for link in ("finger_left_link", "finger_right_link"):
@@ -310,10 +302,7 @@ def test_pybullet_joints_and_masses(arm) -> None:
         base = p.getDynamicsInfo(free.body, -1, physicsClientId=free.cid)[0]
     finally:
         free.close()
-    if name == "fr5_legacy":
-        assert base == pytest.approx(LEGACY_MASSES[0])
-    else:  # the arm (gripper apart) weighs what the datasheet says
-        assert base + sum(masses) == pytest.approx(WEIGHT[name], abs=0.01)
+    assert base + sum(masses) == pytest.approx(WEIGHT[name], abs=0.01)  # the arm weighs what the datasheet says
 
 
 def test_the_root_is_massless_for_kdl_and_pybullet_loads_base_link_as_its_base(arm) -> None:
@@ -377,7 +366,7 @@ def test_forward_kinematics_matches_the_published_chain(arm) -> None:
     for q in configs:
         robot.set(dict(zip(ARM_JOINTS, q)))
         flange_ref, tcp_ref = reference_fk(name, q)
-        for link, ref in ((flange_link(name), flange_ref), ("tcp", tcp_ref)):
+        for link, ref in (("flange", flange_ref), ("tcp", tcp_ref)):
             got = robot.pose(link)
             worst_pos = max(worst_pos, float(np.linalg.norm(got[:3, 3] - ref[:3, 3])))
             worst_rot = max(worst_rot, abs(float(np.dot(got[:3, 2], ref[:3, 2])) - 1.0))

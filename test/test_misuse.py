@@ -132,3 +132,22 @@ def test_a_launch_that_cannot_work_stops_at_once_with_its_reason(tmp_path, argum
     assert result.returncode != 0
     assert reason in result.stdout + result.stderr
     assert "started with pid" not in result.stdout  # nothing was started
+
+
+def test_gymnasiums_checker_passes_headless(monkeypatch):
+    """Without an X display the environment offers no "human" window, so check_env's tour of the
+    render modes passes; asking for one still says what to do."""
+    import gymnasium as gym
+    from gymnasium.utils.env_checker import check_env
+
+    import fr5_rl  # noqa: F401
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    env = gym.make("FR5Reach-v0")
+    try:
+        check_env(env.unwrapped)
+        assert env.unwrapped.metadata["render_modes"] == ["rgb_array"]
+    finally:
+        env.close()
+    with pytest.raises(RuntimeError, match="X display"):
+        gym.make("FR5Reach-v0", render_mode="human")

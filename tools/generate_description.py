@@ -18,10 +18,9 @@ Frames (all metres / radians, URDF conventions):
   * base_link: z up; at all joints zero the arm lies stretched along base -x.
   * upperarm_Link, forearm_Link, wrist1_Link: their z axis is the (parallel) j2/j3/j4
     axis; below, "lateral s" means a coordinate along that axis.
-  * wrist3_Link is the wrist centre (z = the j6 axis, the approach axis). The family's arms have
-    a ``flange`` link at the flange face, d6 further along j6 (the vendor's v6 ``tool_Link``),
-    where gripper_base_link starts. The legacy FR5 file has none: its gripper is drawn
-    gripper_mount_offset beyond wrist3_Link. ``tcp`` lies on the same axis.
+  * wrist3_Link is the wrist centre (z = the j6 axis, the approach axis). A ``flange`` link sits
+    at the flange face, d6 further along j6 (the vendor's v6 ``tool_Link``), where
+    gripper_base_link starts (gripper_mount_offset beyond it); ``tcp`` lies on the same axis.
   * Finger links: origin on the inner pad face; joint value = that finger's travel (m)
     from the closed centre, so the opening width is q_left + q_right.
 
@@ -33,11 +32,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
-import numpy as np
 import trimesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "src"))  # the one description: fr5_rl.config
@@ -83,50 +80,6 @@ FINGER_FRICTION, FINGER_SPINNING_FRICTION = 1.0, 0.001
 
 
 # =========================================================================== the robot
-@dataclass(frozen=True)
-class ArmLayout:
-    """The lengths the drawn shapes need (m), from either chain the package describes.
-
-    :param elbow: the j3 origin in the upper arm's frame (along its y in the legacy file, along
-        its x in the family's).
-    :param flange_face: the flange face beyond the wrist centre along j6 (the family's d6; the
-        legacy file's drawn flange, which stood where its gripper was mounted).
-    """
-
-    d1: float
-    elbow: Tuple[float, float, float]
-    fore_length: float  # the j4 origin at -fore_length along the forearm's x
-    d4: float
-    d5: float
-    flange_face: float
-
-
-# rpy of each joint origin in the two chains: the family's (the vendor's v6 URDFs, from the DH
-# table) and the legacy FR5 file's.
-_FAMILY_RPY = [(0, 0, 0), (1.5708, 0, 0), (0, 0, 0), (0, 0, 0), (1.5708, 0, 0), (-1.5708, 0, 0)]
-_LEGACY_RPY = [(0, 0, 0), (1.5708, -1.5708, 0), (0, 0, -1.5708), (0, 0, 1.5708),
-               (1.5708, 0, -1.5708), (-1.5708, 2.2689, 0)]
-
-
-def arm_layout(origins: Sequence[dict], flange_face: float) -> ArmLayout:
-    """The drawn lengths from the joint origins, after checking that they have one of the two
-    layouts the shapes assume (each offset along one known axis)."""
-    rpys = [tuple(o["rpy"]) for o in origins]
-    if all(np.allclose(r, e, atol=1e-3) for r, e in zip(rpys, _FAMILY_RPY)):
-        pattern = [None, 2, 0, 0, 2, 2]   # index of the only non-zero offset component
-    elif all(np.allclose(r, e, atol=1e-3) for r, e in zip(rpys, _LEGACY_RPY)):
-        pattern = [None, 2, 1, 0, 2, 2]
-    else:
-        raise ValueError(f"joint origin rpys {rpys} are neither the FAIRINO family's nor the legacy FR5 file's")
-    xyz = [np.array(o["xyz"], dtype=float) for o in origins]
-    for i, (v, k) in enumerate(zip(xyz, pattern)):
-        others = np.delete(v, k) if k is not None else v
-        if not np.allclose(others, 0.0):
-            raise ValueError(f"joint {i + 1} origin {v} is not the layout its rpys say")
-    return ArmLayout(float(xyz[1][2]), tuple(float(v) for v in xyz[2]), float(-xyz[3][0]),
-                     float(xyz[4][2]), float(xyz[5][2]), float(flange_face))
-
-
 class ArmSizes:
     """The arm's drawn sizes (the module's constants above) times ``scale``; the base's heights stay
     the FR5's (a bigger arm's shoulder is not proportionally higher: d1 grows slower than its links)."""
@@ -148,12 +101,6 @@ class ArmSizes:
         return radius * self.scale
 
 
-def _tube_along(axis_end: Tuple[float, float, float]) -> Tuple[str, float]:
-    """The axis and the signed length of a link tube from the origin to ``axis_end`` (on one axis)."""
-    k = int(np.argmax(np.abs(axis_end)))
-    return "xyz"[k], float(axis_end[k])
-
-
 def build_robot(cfg: dict) -> Tuple[List[LinkSpec], List[JointSpec]]:
     """All links (geometry in their own frames) and joints of one arm + gripper.
 
@@ -161,12 +108,13 @@ def build_robot(cfg: dict) -> Tuple[List[LinkSpec], List[JointSpec]]:
     """
     arm, grip = cfg, cfg["gripper"]
     names, masses = arm["link_names"], arm["link_masses"]
-    origins = dh_joint_origins(arm["dh"]) if "dh" in arm else arm["joint_origins"]
-    family = "dh" in arm
-    layout = arm_layout(origins, arm["dh"]["d6"] if family else arm["gripper_mount_offset"])
+    dh = {key: float(value) for key, value in arm["dh"].items()}
+    origins = dh_joint_origins(dh)
     z = ArmSizes(float(arm["drawing_scale"]))
-    d1, d4, d5, a3, flange_face = layout.d1, layout.d4, layout.d5, layout.fore_length, layout.flange_face
-    upper_axis, a2 = _tube_along(layout.elbow)
+    # The vendor's v6 layout: the upper arm runs a2 (< 0) along its x to the elbow, the forearm
+    # a3 (< 0) along its x to j4, the flange face d6 beyond the wrist centre.
+    d1, a2, a3, d4, d5, flange_face = dh["d1"], dh["a2"], -dh["a3"], dh["d4"], dh["d5"], dh["d6"]
+    upper_axis = "x"
     links: List[LinkSpec] = []
     L = {n: LinkSpec(n, float(m)) for n, m in zip(names, masses)}
     base, shoulder, upper, fore, w1, w2, w3 = (L[n] for n in names)
@@ -186,9 +134,8 @@ def build_robot(cfg: dict) -> Tuple[List[LinkSpec], List[JointSpec]]:
     shoulder.dark = [v_cyl("z", z.BASE_TOP, z.BASE_TOP + 0.008, z.SHOULDER_R + 0.002, fillet=0.001),
                      v_cyl("y", z.SHOULDER_R - 0.002, z.SHOULDER_R + z.CAP_T, z.cap(0.055), s_top)]
 
-    # upperarm_Link (z = j2 axis, lateral s; the tube runs to the elbow along the upper arm's
-    # y (legacy file) or -x (the family's chain)).
-    elbow = layout.elbow
+    # upperarm_Link (z = j2 axis, lateral s; the tube runs to the elbow along the upper arm's -x).
+    elbow = (a2, 0.0, 0.0)
     tube_u = (0.0, 0.0, z.UPPER_S)
     sign = 1.0 if a2 > 0 else -1.0
     tube_lo, tube_hi = sorted((sign * (z.J2_HOUSING_R - 0.01), a2 - sign * (z.ELBOW_R - 0.01)))
@@ -233,19 +180,18 @@ def build_robot(cfg: dict) -> Tuple[List[LinkSpec], List[JointSpec]]:
                v_cyl("y", z.WRIST2_J6_BACK - z.CAP_T, z.WRIST2_J6_BACK + 0.002, z.cap(0.038), j6)]
 
     # wrist3_Link (the wrist centre, z = j6 axis): rotating cover and the dark tool flange,
-    # whose face is flange_face further along j6. The family's is longer (d6): a little slimmer,
-    # to clear the j4 housing at the home pose, and its collision stops short of the face, where
-    # the gripper (the flange frame's child, not wrist3's) begins.
-    w3_r, w3_end = (0.9 * z.WRIST_R, flange_face - 0.003) if family else (z.WRIST_R, flange_face)
+    # whose face is flange_face (d6) further along j6: a little slimmer than the other wrist
+    # housings, to clear the j4 housing at the home pose, and its collision stops short of the
+    # face, where the gripper (the flange frame's child, not wrist3's) begins.
+    w3_r, w3_end = 0.9 * z.WRIST_R, flange_face - 0.003
     w3.collisions = [cyl("z", z.WRIST3_S0, w3_end, w3_r)]
     w3.white = [v_cyl("z", z.WRIST3_S0, flange_face - 0.008, w3_r, fillet=0.002)]
     w3.dark = [v_cyl("z", flange_face - 0.009, flange_face, z.cap(0.040), fillet=0.001)]
     links += [base, shoulder, upper, fore, w1, w2, w3]
     flange = str(arm["flange_frame"])
-    if family:  # a frame at the flange face, as the vendor's v6 tool_Link
-        links.append(LinkSpec(flange, 0.0))
+    links.append(LinkSpec(flange, 0.0))  # a frame at the flange face, as the vendor's v6 tool_Link
     mount_offset = float(arm["gripper_mount_offset"])
-    tcp_offset = float(arm.get("tcp_offset", mount_offset + float(grip["tcp_offset"])))
+    tcp_offset = mount_offset + float(grip["tcp_offset"])
 
     # Gripper, in gripper_base_link: origin on the mounting face, z = approach axis.
     tcp_z = tcp_offset - mount_offset                     # tcp in the gripper frame
@@ -300,8 +246,7 @@ def build_robot(cfg: dict) -> Tuple[List[LinkSpec], List[JointSpec]]:
                                  "effort": arm["effort_limits"][i],
                                  "velocity": arm["velocity_limits"][i]}))
         parent = names[i + 1]
-    if family:
-        joints.append(JointSpec("flange_joint", "fixed", names[-1], flange, (0.0, 0.0, flange_face), (0.0, 0.0, 0.0)))
+    joints.append(JointSpec("flange_joint", "fixed", names[-1], flange, (0.0, 0.0, flange_face), (0.0, 0.0, 0.0)))
     joints.append(JointSpec("gripper_mount", "fixed", flange, "gripper_base_link",
                             (0.0, 0.0, mount_offset), (0.0, 0.0, 0.0)))
     finger_limit = {"lower": 0.0, "upper": travel, "effort": float(grip["finger_effort"]),

@@ -201,9 +201,7 @@ def load_robot_spec(robot: str = DEFAULT_ROBOT) -> RobotSpec:
             raise ConfigError(f"{source}: '{key}' needs {n} values, got {values.shape}")
         return values
 
-    if ("dh" in data) == ("joint_origins" in data):
-        raise ConfigError(f"{source}: give either 'dh' (the published DH lengths) or 'joint_origins', not both")
-    origins = dh_joint_origins(data["dh"]) if "dh" in data else data["joint_origins"]
+    origins = dh_joint_origins(data["dh"])
     spec = RobotSpec(
         model=robot,
         joint_names=names,
@@ -218,9 +216,8 @@ def load_robot_spec(robot: str = DEFAULT_ROBOT) -> RobotSpec:
         finger_travel=float(gripper["finger_travel"]),
         finger_velocity=float(gripper["finger_velocity"]),
         finger_effort=float(gripper["finger_effort"]),
-        flange_offset=float(data["dh"]["d6"]) if "dh" in data else 0.0,
-        # The legacy file measured its tcp from the wrist centre and says so with its own tcp_offset.
-        tcp_offset=float(data.get("tcp_offset", float(data["gripper_mount_offset"]) + float(gripper["tcp_offset"]))),
+        flange_offset=float(data["dh"]["d6"]),
+        tcp_offset=float(data["gripper_mount_offset"]) + float(gripper["tcp_offset"]),
         base_frame=str(gripper["base_frame"]),
         flange_frame=str(data["flange_frame"]),
         tcp_frame=str(gripper["tcp_frame"]),

@@ -12,6 +12,7 @@ ROS simulator node) needs, without reaching into the simulator: :meth:`FR5Env.ad
 """
 from __future__ import annotations
 
+import os
 import copy
 import math
 from collections import deque
@@ -148,7 +149,7 @@ class SavedEpisode:
 # handles, configuration, spaces), saved apart (the task, the shaper), or the random stream.
 _SHARED_STATE = frozenset({
     "world", "robot", "cfg", "robot_spec", "task", "kinematics", "shaper", "observation_builder",
-    "observation_space", "action_space", "render_mode", "spec", "_bridge_model", "_np_random", "_np_random_seed",
+    "observation_space", "action_space", "render_mode", "metadata", "spec", "_bridge_model", "_np_random", "_np_random_seed",
 })
 
 
@@ -174,6 +175,9 @@ class FR5Env(gym.Env):
             raise ValueError(f"unknown task '{task}'; choose one of {sorted(TASKS)}")
         if render_mode not in (None, "rgb_array", "human"):
             raise ValueError(f"render_mode must be None, 'rgb_array' or 'human', got {render_mode!r}")
+        # What this machine can render: without an X display no "human" window (gymnasium's
+        # check_env tries every mode listed here).
+        self.metadata = {**self.metadata, "render_modes": ["rgb_array"] + (["human"] if os.environ.get("DISPLAY") else [])}
         if isinstance(config, EnvConfig):
             if robot is not None and robot != config.robot:
                 raise ValueError(f"robot='{robot}' contradicts the configuration's robot '{config.robot}'")

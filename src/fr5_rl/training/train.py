@@ -26,7 +26,7 @@ from ..deploy.bundle import (MODEL_FILE, STATS_FILE, ModelFilesError, algorithm_
                               recover_model_dir, save_model_dir, write_json_atomic)
 from .algorithms import check_hyperparameters, hyperparameter_source, load_hyperparameters
 from .hyperparameters import ExpertStartSettings, Hyperparameters
-from .run_settings import FIXED_ON_RESUME, TrainRun, read_run_config
+from .run_settings import CONFIG_FILE, FIXED_ON_RESUME, TrainRun, read_run_config
 
 EVAL_SEED_OFFSET = 10_000  # evaluation seeds never overlap training seeds
 
@@ -347,11 +347,14 @@ def train(run: TrainRun, t_start: Optional[float] = None,
             run_dir=run.run_dir if run.run_dir is not None
             else Path("runs") / f"{run.task}_{run.algo}_{time.strftime('%Y%m%d-%H%M%S')}")
     run.check()
-    if not run.resume and Path(run.run_dir).is_dir() and any(Path(run.run_dir).iterdir()):
+    earlier = [name for name in (CONFIG_FILE, "final", "checkpoints", "monitor") if (Path(run.run_dir) / name).exists()]
+    if not run.resume and earlier:
         if not run.force:
             raise ConfigError(f"{run.run_dir} holds a run already: continue it with --resume --run-dir {run.run_dir}, "
                               "pick a new --run-dir (or leave it out for a fresh one), or pass --force to replace it")
-        shutil.rmtree(run.run_dir)  # --force: nothing of the old run mixes into the new one
+        for name in earlier:  # --force: nothing of the old run mixes into the new one
+            path = Path(run.run_dir) / name
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
     for warning in check_hyperparameters(run.algo, hyper, run.n_envs, source):
         print(f"train.py: warning: {warning}", file=sys.stderr)
     if run.subprocess and run.start_method == "forkserver" and (run.processes or available_cores()) > 1:
