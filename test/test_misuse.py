@@ -5,6 +5,7 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from fr5_rl.deploy.bundle import ModelFilesError, task_and_arm
@@ -151,3 +152,33 @@ def test_gymnasiums_checker_passes_headless(monkeypatch):
         env.close()
     with pytest.raises(RuntimeError, match="X display"):
         gym.make("FR5Reach-v0", render_mode="human")
+
+
+def test_help_shows_each_options_default():
+    from fr5_rl.cli.train import build_parser
+
+    text = " ".join(build_parser().format_help().split())
+    for option, default in (("--task {reach,grasp}", "reach"), ("--algo {ppo,sac,td3,tqc}", "ppo"), ("--seed SEED", "0")):
+        assert f"{option} (default: {default})" in text, option
+    assert "--resume continue" in text and "(default: False)" not in text  # a switch says nothing of False
+
+
+def test_the_spec_says_how_long_an_episode_is_configured_to_last():
+    import gymnasium as gym
+
+    import fr5_rl  # noqa: F401
+
+    reach = gym.make("FR5Reach-v0")
+    longer = gym.make("FR5Grasp-v0", config={"grasp": {"max_steps": 300}})
+    try:
+        assert reach.spec.max_episode_steps == reach.unwrapped.cfg.reach.max_steps == 150
+        assert longer.spec.max_episode_steps == 300  # no TimeLimit at the registered length cuts it short
+        reach.reset(seed=0)
+        steps, done = 0, False
+        while not done:
+            _, _, terminated, truncated, _ = reach.step(np.zeros(7, dtype=np.float32))
+            steps, done = steps + 1, terminated or truncated
+        assert steps == 150 and truncated
+    finally:
+        reach.close()
+        longer.close()

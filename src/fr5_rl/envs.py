@@ -12,6 +12,7 @@ ROS simulator node) needs, without reaching into the simulator: :meth:`FR5Env.ad
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import copy
 import math
@@ -22,6 +23,7 @@ from typing import Any, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tup
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.envs.registration import EnvSpec
 
 from .config import load_robot_spec
 from .env_config import EnvConfig, load_env_config
@@ -149,7 +151,7 @@ class SavedEpisode:
 # handles, configuration, spaces), saved apart (the task, the shaper), or the random stream.
 _SHARED_STATE = frozenset({
     "world", "robot", "cfg", "robot_spec", "task", "kinematics", "shaper", "observation_builder",
-    "observation_space", "action_space", "render_mode", "metadata", "spec", "_bridge_model", "_np_random", "_np_random_seed",
+    "observation_space", "action_space", "render_mode", "metadata", "spec", "_spec", "_bridge_model", "_np_random", "_np_random_seed",
 })
 
 
@@ -167,6 +169,7 @@ class FR5Env(gym.Env):
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 50}
+    _spec: Optional[EnvSpec] = None
 
     def __init__(self, task: str = "reach", config: Union[EnvConfig, Mapping[str, Any], None] = None,
                  render_mode: Optional[str] = None, robot: Optional[str] = None) -> None:
@@ -248,6 +251,19 @@ class FR5Env(gym.Env):
         self._held = None  # hold_object's constraint (the camera's calibration), or None
         # randomisation.target_hidden_radius; -1: never hidden (a distance is never below it)
         self._target_hidden_radius = self.cfg.randomisation.target_hidden_radius or -1.0
+
+    @property
+    def spec(self) -> Optional[EnvSpec]:
+        """gymnasium's spec, with ``max_episode_steps`` the configured task's ``max_steps``: the
+        environment truncates itself there (a TimeLimit fixed at registration would cut an
+        episode the configuration makes longer)."""
+        return self._spec
+
+    @spec.setter
+    def spec(self, value: Optional[EnvSpec]) -> None:
+        if value is not None and value.max_episode_steps is None and hasattr(self, "cfg"):
+            value = dataclasses.replace(value, max_episode_steps=self.cfg.task(self.task.name).max_steps)
+        self._spec = value
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None

@@ -3,8 +3,9 @@
 
 With launch/view_robot.launch running (joint_state_publisher at the home pose,
 robot_state_publisher with urdf/fr5.urdf), the transform base_link -> tcp must appear
-within 10 s and equal the tcp pose predicted by an FK written here from the published FR5
-joint-origin table (not from the URDF): within 1 mm and 1e-3 rad.
+within 10 s and equal the tcp pose predicted by an FK written here from the current FR5's
+published DH table as the vendor's v6 URDF lays it out (not from our URDF): within 1 mm and
+1e-3 rad.
 """
 import math
 import unittest
@@ -15,17 +16,18 @@ import rostest
 import tf2_ros
 
 PKG = "fr5_rl"
-# FR5 joint origins in the parent frame: xyz (m), rpy (rad); every joint turns about z.
+# The current FR5's joint origins in the parent frame: xyz (m), rpy (rad); every joint turns about z
+# (d1 0.152, a2 -0.425, a3 -0.395, d4 0.102, d5 0.102; the flange face d6 = 0.1 beyond j6).
 FR5_ORIGINS = [
     ((0, 0, 0), (0, 0, 0)),
-    ((0, 0, 0.155), (1.570796, -1.570796, 0)),
-    ((0, 0.425, 0), (0, 0, -1.570796)),
-    ((-0.395, 0, 0), (0, 0, 1.570796)),
-    ((0, 0, 0.13), (1.570796, 0, -1.570796)),
-    ((0, 0, 0.102), (-1.570796, 2.268928, 0)),
+    ((0, 0, 0.152), (1.570796, 0, 0)),
+    ((-0.425, 0, 0), (0, 0, 0)),
+    ((-0.395, 0, 0), (0, 0, 0)),
+    ((0, 0, 0.102), (1.570796, 0, 0)),
+    ((0, 0, 0.102), (-1.570796, 0, 0)),
 ]
 HOME = (0.0, -1.570796, 1.570796, -1.570796, -1.570796, 0.0)   # rad, j1..j6
-TCP_OFFSET = 0.17   # m along the flange (wrist3_Link) z axis
+TCP_OFFSET = 0.1 + 0.17   # m along the j6 axis: the flange face, then the gripper's tcp beyond it
 TIMEOUT = 10.0      # s
 
 

@@ -7,7 +7,7 @@ import argparse
 import sys
 from typing import List, Optional
 
-from ..help_text import plain
+from ..help_text import HelpFormatter, plain
 
 
 def script_args(argv: Optional[List[str]]) -> List[str]:
@@ -26,4 +26,4 @@ def parser_from_doc(program: str, doc: str) -> argparse.ArgumentParser:
     rest (examples keep their layout)."""
     return argparse.ArgumentParser(prog=program, description=plain(doc.split("\n\n")[0]),
                                    epilog=plain(doc.split("\n\n", 1)[1]) if "\n\n" in doc else None,
-                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+                                   formatter_class=HelpFormatter)

@@ -18,13 +18,13 @@ from typing import Any, Dict, List, Optional
 from ..config import ConfigError, robot_names
 from ..deploy.bundle import META_FILE, ModelFilesError
 from ..training.evaluation import HELD_OUT_SEED_START
-from ..help_text import plain
+from ..help_text import HelpFormatter, plain
 from . import fail, script_args
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="evaluate.py", description=plain(__doc__.split("\n\n")[0]),
-                                     epilog=plain(__doc__.split("\n\n", 1)[1]))
+                                     epilog=plain(__doc__.split("\n\n", 1)[1]), formatter_class=HelpFormatter)
     parser.add_argument("model_dir", type=Path, nargs="?", help="model directory (meta.json + the backend's files)")
     parser.add_argument("--expert", choices=["reach", "grasp"], help="evaluate the scripted expert on this task")
     parser.add_argument("--robot", choices=robot_names(), default=None,

@@ -11,12 +11,12 @@ from typing import List, Optional
 
 from ..config import ConfigError, robot_names
 from ..deploy.bundle import ModelFilesError, arm_of
-from ..help_text import plain
+from ..help_text import HelpFormatter, plain
 from . import fail, script_args
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="export_onnx.py", description=plain(__doc__.split("\n\n")[0]),
-                                     epilog=plain(__doc__.split("\n\n", 1)[1]))
+                                     epilog=plain(__doc__.split("\n\n", 1)[1]), formatter_class=HelpFormatter)
     parser.add_argument("model_dir", type=Path, help="model directory (meta.json, model.zip, vecnormalize.pkl)")
     parser.add_argument("--check", type=int, default=1000, help="parity check on N rollout observations (0: skip)")
     parser.add_argument("--robot", choices=robot_names(), default=None,

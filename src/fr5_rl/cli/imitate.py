@@ -12,13 +12,13 @@ from typing import List, Optional
 from ..config import ConfigError, robot_names
 from ..deploy.bundle import ModelFilesError
 from ..training.run_settings import DaggerRun
-from ..help_text import plain
+from ..help_text import HelpFormatter, plain
 from . import fail, script_args
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="imitate.py", description=plain(__doc__.split("\n\n")[0]),
-                                     epilog=plain(__doc__.split("\n\n", 1)[1]))
+                                     epilog=plain(__doc__.split("\n\n", 1)[1]), formatter_class=HelpFormatter)
     parser.add_argument("--task", choices=["reach", "grasp"], default="grasp")
     parser.add_argument("--hyperparams", default=None,
                         help="DAgger YAML (default: config/dagger_<task>.yaml)")

@@ -19,14 +19,14 @@ from typing import List, Optional, Set
 from ..config import ConfigError, robot_names
 from ..deploy.bundle import ModelFilesError
 from ..training.run_settings import TrainRun, read_run_config
-from ..help_text import plain
+from ..help_text import HelpFormatter, plain
 from . import fail, script_args
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="train.py", description=plain(__doc__.split("\n\n")[0]),
                                      epilog=plain(__doc__.split("\n\n", 1)[1]),
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                                     formatter_class=HelpFormatter)
     parser.add_argument("--task", choices=["reach", "grasp"], default="reach")
     parser.add_argument("--algo", choices=["ppo", "sac", "td3", "tqc"], default="ppo")
     parser.add_argument("--robot", choices=robot_names(), default=None,

@@ -23,14 +23,14 @@ from typing import List, Optional
 
 from ..config import ConfigError, robot_names
 from ..deploy.bundle import ModelFilesError
-from ..help_text import plain
+from ..help_text import HelpFormatter, plain
 from . import fail, script_args
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tune.py", description=plain(__doc__.split("\n\n")[0]),
                                      epilog=plain(__doc__.split("\n\n", 1)[1]),
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                                     formatter_class=HelpFormatter)
     parser.add_argument("--task", choices=["reach", "grasp"], default="reach")
     parser.add_argument("--algo", choices=["ppo", "sac", "td3", "tqc"], default="ppo")
     parser.add_argument("--robot", choices=robot_names(), default=None,
