@@ -223,8 +223,6 @@ def load_robot_spec(robot: str = DEFAULT_ROBOT) -> RobotSpec:
         tcp_frame=str(gripper["tcp_frame"]),
         driver_flange_link=str(data["driver_flange_link"]),
     )
-    if spec.joint_origins_xyz.shape != (n, 3) or spec.joint_origins_rpy.shape != (n, 3):
-        raise ConfigError(f"{source}: the chain needs {n} joint origins")
     if np.any(spec.lower_limits >= spec.upper_limits):
         raise ConfigError(f"{source}: every lower limit must be below its upper limit")
     if np.any(spec.home_joint_positions < spec.lower_limits) or np.any(

@@ -18,10 +18,10 @@ from ..env_config import SimulationConfig
 _WORLD_ROOT = re.compile(r'^  <link name="world"/>\n|^  <joint name="world_joint" type="fixed">.*\n', re.MULTILINE)
 
 
-def urdf_for_pybullet(robot_or_path: str | Path) -> str:
+def urdf_for_pybullet(robot: str) -> str:
     """Path of a copy of an arm's URDF that PyBullet can load.
 
-    :param robot_or_path: the arm's name (``urdf/<robot>.urdf``), or a URDF file.
+    :param robot: the arm's name (``urdf/<robot>.urdf``).
 
     PyBullet does not resolve ``package://fr5_rl/`` mesh URIs, so the copy has them replaced by
     the package root. The massless ``world`` root that robot_state_publisher needs is left out:
@@ -29,7 +29,7 @@ def urdf_for_pybullet(robot_or_path: str | Path) -> str:
     a content hash.
     """
     root = package_root()
-    path = Path(robot_or_path) if isinstance(robot_or_path, Path) else urdf_path(robot_or_path)
+    path = urdf_path(robot)
     if not path.is_file():
         raise FileNotFoundError(f"{path} is missing; regenerate it with `make meshes`")
     text = path.read_text(encoding="utf-8").replace("package://fr5_rl/", f"{root}/")
