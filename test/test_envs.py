@@ -639,6 +639,38 @@ def test_placement_focus_places_its_share_in_the_focus_region_and_nothing_else_w
     np.testing.assert_array_equal(placements({**focus, "placement_focus_share": 0.0}), uniform)
 
 
+def test_an_arm_left_in_place_never_gets_the_object_set_down_inside_its_hand():
+    """reset(options={"arm_positions": ...}) (a real arm between episodes) with the gripper down
+    at the spot the seed draws: the object is drawn again, clear of the arm (checked with
+    PyBullet's own distance query), and stays on the table through the next steps; a seed whose
+    draw lies clear is placed exactly as a plain reset places it."""
+    env = FR5Env(task="grasp")
+    try:
+        expert = ScriptedExpert(env)
+        moved = 0
+        for seed in range(3):
+            observation, info = env.reset(seed=seed)
+            drawn = info["object_start"].copy()
+            while env.tcp_position()[2] > 0.05:  # down around the object, fingers open
+                observation, *_ = env.step(expert.act(observation))
+            arm = env.joint_positions().tolist()
+            _, info = env.reset(seed=seed, options={"arm_positions": arm})
+            moved += not np.allclose(info["object_start"], drawn)
+            assert not p.getClosestPoints(env.robot.body, env.world.object_id, 0.02,
+                                          physicsClientId=env.world.client)
+            for _ in range(10):
+                env.step(np.zeros(7))
+            position, _ = p.getBasePositionAndOrientation(env.world.object_id, physicsClientId=env.world.client)
+            np.testing.assert_allclose(position, info["object_start"], atol=2e-3)
+        assert moved == 3
+        _, info = env.reset(seed=5)
+        plain = info["object_start"]
+        _, info = env.reset(seed=5, options={"arm_positions": env.robot_spec.home_joint_positions.tolist()})
+        np.testing.assert_array_equal(info["object_start"], plain)
+    finally:
+        env.close()
+
+
 def test_bad_config_through_gym_make():
     with pytest.raises(ConfigError):
         gym.make("FR5Grasp-v0", config={"grasp": {"lift_heigth": 0.1}})

@@ -45,7 +45,8 @@ def make_params(**overrides) -> GripperBridgeParams:
     """config/gripper_bridge.yaml with fast test timings, then ``overrides``."""
     # No read-back here: these tests count the commands; test_gripper_bridge_emulator.py reads back.
     fast = dict(max_call_rate=50.0, call_timeout=0.2, retry_initial=0.05, retry_max=0.2, probe_period=0.0,
-                activation_settle=0.0, reset_settle=0.0, readback_rate=0.0, error_log_period=0.0, status_rate=10.0)
+                activation_settle=0.0, reset_settle=0.0, readback_rate=0.0, error_log_period=0.0, status_rate=10.0,
+                startup_grace=0.0)
     return dataclasses.replace(load_typed(GripperBridgeParams, "gripper_bridge"), **{**fast, **overrides})
 
 
@@ -492,6 +493,28 @@ def test_controller_gone_and_back_resends_the_newest_state(controller, drive, mo
     assert bridge.status().connected and bridge.status().last_error == ""
     print(f"\n{mode}: loss noticed after {detect:.3f} s (probe every {params.probe_period} s), recovered "
           f"{recover:.3f} s after the controller came back (backoff cap {params.retry_max} s), bridge's clock")
+
+
+def test_a_controller_not_up_yet_at_start_is_waited_for_in_info_lines_then_an_error(controller, drive):
+    """Launched together, the controller (here: its stand-in) may come up after the bridge: inside
+    ~startup_grace that is said as info, and its first answer is no "again"; a controller that has
+    never answered once the grace is over is an error."""
+    controller.stop()
+    run = drive(controller, startup_grace=0.5, retry_initial=0.05, retry_max=0.1)
+    bridge, events = run.bridge, run.events
+    bridge.submit(0.04)
+    run.run_for(0.3)
+    assert events.matching("info", "waiting for the controller") and not events.matching("error", "")
+    controller.start()
+    run.run_until(lambda: bridge.status().connected, 1.0, "the controller's first answer")
+    assert events.matching("info", "answers after") and not events.matching("info", "answers again")
+    assert not events.matching("error", "")
+
+    controller.stop()
+    late = drive(controller, startup_grace=0.2, retry_initial=0.05, retry_max=0.1)
+    late.bridge.submit(0.04)
+    late.run_for(0.6)
+    assert late.events.matching("error", "unreachable")
 
 
 def test_reactivation_can_be_turned_off(controller, drive):

@@ -61,6 +61,11 @@ class ObjectConfig:
     lateral_friction: float
     region_low: List[float]
     region_high: List[float]
+    # With the arm left where the last episode ended (a real arm between episodes), a draw that
+    # puts the object closer than this (m) to the arm or gripper is drawn again: nobody sets an
+    # object down inside the hand, and PyBullet would shoot it out through the table.
+    placement_clearance: float = 0.02
+    placement_attempts: int = 20
 
     def check(self, source: str) -> None:
         if self.shape not in ("cylinder", "box"):

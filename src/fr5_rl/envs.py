@@ -294,6 +294,8 @@ class FR5Env(gym.Env):
         start = np.clip(start, self.robot_spec.lower_limits, self.robot_spec.upper_limits)
         self._gripper_command_width = self._sent_gripper_width = self.robot_spec.max_opening_width
         self.robot.reset(start, self._gripper_command_width)
+        if options and "arm_positions" in options and not given:
+            self._place_clear_of_arm(rng)
         self.shaper.reset()
         self._action_history.reset()
         self.task.reset()
@@ -306,6 +308,26 @@ class FR5Env(gym.Env):
         state, obs = self._observe()
         self.task.prime(state)
         return obs, {"is_success": False, "failure": None, "object_start": np.array(self._object_start)}
+
+    def _place_clear_of_arm(self, rng: np.random.Generator) -> None:
+        """With the arm kept where it stands: draw the object's place again (after every other
+        draw, so a seed whose object lies clear is placed as gym places it) while it would lie
+        within ``object.placement_clearance`` of the arm or gripper.
+
+        :raises RuntimeError: no clear place in ``object.placement_attempts`` draws (the arm
+            covers the placement region: move it away first).
+        """
+        obj = self.cfg.object
+        low, high = np.asarray(obj.region_low), np.asarray(obj.region_high)
+        for _ in range(obj.placement_attempts):
+            if not self.robot.comes_within(self.world.object_id, obj.placement_clearance):
+                return
+            xy = rng.uniform(low, high)
+            self._object_start = (float(xy[0]), float(xy[1]), self._object_rest_z)
+            self.world.place_object(self._object_start, yaw=float(rng.uniform(-np.pi, np.pi)))
+        if self.robot.comes_within(self.world.object_id, obj.placement_clearance):
+            raise RuntimeError(f"no place for the object clear of the arm in {obj.placement_attempts} draws: "
+                               "the arm covers the placement region; move it away before the reset")
 
     def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:
         # Plain floats from here on: for seven values that is faster than numpy, and this runs

@@ -87,6 +87,7 @@ class GripperBridgeParams:
     probe_period: float
     status_rate: float
     error_log_period: float
+    startup_grace: float
 
     def check(self, source: str) -> None:
         """Refuse values the SDK or the bridge cannot work with.
@@ -236,6 +237,8 @@ class GripperBridge:
         self.retry_at = 0.0  # backoff: no request before this time
         self.last_request_at: Optional[float] = None
         self.lost_at: Optional[float] = None  # when the controller stopped answering
+        self.started_at = clock()
+        self.ever_answered = False  # a controller not up yet at start-up is no fault worth an error
         self.gripper_fault: Optional[int] = None
         self.fault_reported = True  # what on_fault last heard (nothing heard from the controller: a fault)
         self.last_move_at: Optional[float] = None  # when the latest MoveGripper was sent
@@ -528,9 +531,10 @@ class GripperBridge:
             self.log.forget("unreachable")
             self.backoff.reset()
             # Not throttled: a recovery is rare and always worth a line.
-            self.log.report("info", f"gripper bridge: controller {self.params.controller_url} answers again "
-                                         f"after {now - self.lost_at:.1f} s; resending the newest gripper state")
-        self.connected, self.lost_at = True, None
+            self.log.report("info", f"gripper bridge: controller {self.params.controller_url} answers "
+                                    f"{'again ' if self.ever_answered else ''}after {now - self.lost_at:.1f} s; "
+                                    "resending the newest gripper state")
+        self.connected, self.lost_at, self.ever_answered = True, None, True
 
     def _succeeded(self, step: str, target: Union[int, str, None], values: Tuple[Any, ...], now: float) -> None:
         """Every request of ``step`` returned 0.
@@ -603,5 +607,10 @@ class GripperBridge:
         self.retry_at = now + delay
         self.last_error = str(error)
         what = "timed out" if error.timed_out else "unreachable"
+        if not self.ever_answered and now - self.started_at < self.params.startup_grace:
+            # Launched together, the controller (or its emulation) may simply not be up yet.
+            self.log("info", "not_up_yet", f"gripper bridge: waiting for the controller {self.params.controller_url} "
+                                            f"({what} so far); retrying in {delay:.2f} s")
+            return
         self.log("error", "unreachable", f"gripper bridge: controller {self.params.controller_url} {what}: {error}; "
                                          f"retrying in {delay:.2f} s (backoff up to {self.params.retry_max:g} s)")

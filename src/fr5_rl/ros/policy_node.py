@@ -362,8 +362,9 @@ class PolicyNode:
     def report_hold(self, hold: Hold, previous: Optional[Hold]) -> None:
         # At once when the kind of problem changes, then at most every 2 s. A pause asked for
         # through ~enable is no problem, said once; so is an input not yet come while the other
-        # nodes start (~startup_grace), which every launch goes through.
-        starting = (hold.reason in (HoldReason.NO_JOINT_STATE, HoldReason.NO_TARGET)
+        # nodes start (~startup_grace), which every launch goes through; a gripper still
+        # activating then is no fault either.
+        starting = (hold.reason in (HoldReason.NO_JOINT_STATE, HoldReason.NO_TARGET, HoldReason.GRIPPER_FAULT)
                     and time.monotonic() - self.started < self.params.startup_grace)
         if hold.reason is HoldReason.DISABLED or starting:
             if previous is None or previous.reason != hold.reason:

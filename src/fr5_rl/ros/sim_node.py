@@ -112,6 +112,7 @@ class SimNodeParams:
     policy_reset_service: str
     policy_enable_service: str
     episode_start: str
+    first_command_timeout: float
     outcome_log: str
 
     def check(self, source: str) -> None:
@@ -133,9 +134,10 @@ class SimNodeParams:
             raise ConfigError(f"{source}: 'task' must be reach, grasp or \"\" (the model's), got {self.task!r}")
         check_positive(source, publish_rate=self.publish_rate, physics_dt=self.physics_dt, camera_rate=self.camera_rate,
                   marker_rate=self.marker_rate, solver_iterations=self.solver_iterations)
-        if min(self.episodes, self.camera_noise_std, self.pause_between_episodes, self.reset_settle_time) < 0:
-            raise ConfigError(f"{source}: episodes, camera_noise_std, pause_between_episodes and reset_settle_time "
-                              "must be >= 0")
+        if min(self.episodes, self.camera_noise_std, self.pause_between_episodes, self.reset_settle_time,
+               self.first_command_timeout) < 0:
+            raise ConfigError(f"{source}: episodes, camera_noise_std, pause_between_episodes, reset_settle_time "
+                              "and first_command_timeout must be >= 0")
 
 
 class SimulatorNode:
@@ -225,6 +227,7 @@ class SimulatorNode:
         # start move runs (commands obeyed, the episode not yet timed) until it answers.
         self.positioning = False
         self.episode_starts = 0
+        self.uncommanded_since: Optional[float] = None  # real time: monotonic s the episode has waited for a command
 
         # ---- ROS interfaces
         self.joint_pub = rospy.Publisher(params.joint_states_topic, JointState, queue_size=10)
@@ -301,6 +304,7 @@ class SimulatorNode:
                         self._start_episode(settle=params.reset_settle_time)
                 if self.controller is not None:
                     self._take_controller_command()
+                self._end_if_never_commanded(pacer.sim_time)
                 if not self.holding:
                     self.loop_lateness.append(pacer.lateness())
                 for step in pacer.due_steps():
@@ -378,6 +382,24 @@ class SimulatorNode:
         if periods:
             print(f"lockstep: {periods * env.control_dt:.1f} s simulated in {wall:.1f} s of wall time "
                   f"({periods * env.control_dt / max(wall, 1e-9):.1f}x real time)", flush=True)
+
+    def _end_if_never_commanded(self, sim_time: float) -> None:
+        """Real time (lock held): an episode that a connected policy node never commands (it holds:
+        a target it refuses, a fault) ends after ``~first_command_timeout`` as failure
+        ``"no_command"``, so a run always finishes; its hold message says why."""
+        waiting = (self.params.first_command_timeout > 0.0 and not self.holding and not self.positioning
+                   and not self.commanded and self.command_sub.get_num_connections() > 0)
+        if not waiting:
+            self.uncommanded_since = None
+            return
+        now = time.monotonic()
+        if self.uncommanded_since is None:
+            self.uncommanded_since = now
+        elif now - self.uncommanded_since > self.params.first_command_timeout:
+            self.uncommanded_since = None
+            rospy.logwarn(f"sim_node: the policy node sent no command for {self.params.first_command_timeout:.0f} s "
+                          "of this episode (its hold message says why): ending it as failure no_command")
+            self._finish_episode(EpisodeVerdict(False, "no_command", True, False, 0, None), sim_time)
 
     def _warm_up(self, now_ns: int, period_ns: int) -> int:
         """Run periods without physics until one command arrives within its period: every
@@ -511,13 +533,25 @@ class SimulatorNode:
             ok, detail = False, str(error)
         if not ok:
             # After a teleport the guard may first see the last episode's end pose and refuse it;
-            # the next state, at home, starts it. Only a real start move that failed is news.
-            log = rospy.logwarn if self.params.episode_start == "go_to_start" else rospy.logdebug
+            # the next state, at home, starts it. Only a real start move that failed is news, not
+            # a policy node that ended with its launch.
+            news = self.params.episode_start == "go_to_start" and self._policy_still_there()
+            log = rospy.logwarn if news else rospy.logdebug
             log(f"sim_node: the policy node's reset did not end at the start: {detail}")
         with self.lock:
             if self.episode_starts == start:
                 self.positioning = False
                 self.commanded = False  # timed from the policy's first command
+
+    def _policy_still_there(self) -> bool:
+        """Whether the policy node's ~reset is still offered (and this node not shutting down)."""
+        if rospy.is_shutdown():
+            return False
+        try:
+            rospy.wait_for_service(self.params.policy_reset_service, timeout=0.5)
+        except (rospy.ROSException, rospy.ROSInterruptException):
+            return False
+        return not rospy.is_shutdown()
 
     def _finish_episode(self, verdict: EpisodeVerdict, sim_time: float) -> None:
         """Publish and log the outcome; in real time, hold the arm still for a moment."""

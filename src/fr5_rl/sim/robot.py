@@ -224,3 +224,9 @@ class FR5Robot:
     def contacts(self) -> list:
         """All contact points (PyBullet tuples) of the robot found by the last physics step."""
         return p.getContactPoints(bodyA=self.body, physicsClientId=self.client)
+
+    def comes_within(self, body: int, distance: float) -> bool:
+        """Whether any link of the arm or gripper lies closer than ``distance`` (m) to ``body``
+        where they stand now (no physics step needed: for checking a placement)."""
+        return len(p.getClosestPoints(bodyA=self.body, bodyB=body, distance=float(distance),
+                                      physicsClientId=self.client)) > 0
