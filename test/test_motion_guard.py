@@ -159,17 +159,65 @@ def glitch_reader() -> JointStateReader:
                             max_joint_speeds=ROBOT.velocity_limits * GUARD.glitch_speed_factor)
 
 
-def test_an_impossible_jump_holds_until_two_states_agree():
+def test_a_one_message_spike_recovers_by_itself():
     joints = glitch_reader()
     joints.update(ARM, list(HOME), [0.0] * 6, 10.000, NOW)
     assert joints.reading().problem is None
-    joints.update(ARM, list(HOME + 0.3), [0.0] * 6, 10.005, NOW + 0.005)  # 60 rad/s: a glitch
-    assert "no real motion" in joints.reading().problem
-    joints.update(ARM, list(HOME + 0.001), [0.0] * 6, 10.010, NOW + 0.010)  # back: a jump again
-    assert joints.reading().problem is not None
-    joints.update(ARM, list(HOME + 0.002), [0.0] * 6, 10.015, NOW + 0.015)  # agrees with the one before
+    joints.update(ARM, list(HOME + 0.3), [0.0] * 6, 10.005, NOW + 0.005)  # 60 rad/s: no real motion
+    assert "no real motion" in joints.reading().problem and joints.latched_jump() is not None
+    joints.update(ARM, list(HOME + 0.001), [0.0] * 6, 10.010, NOW + 0.010)  # back, but a jump from the spike
+    assert joints.reading().value is None
+    joints.update(ARM, list(HOME + 0.002), [0.0] * 6, 10.015, NOW + 0.015)  # back, and agrees with the one before
     reading = joints.reading()
     assert reading.problem is None and reading.value.positions[0] == pytest.approx(HOME[0] + 0.002)
+    assert joints.latched_jump() is None
+
+
+def test_a_driver_glitching_every_other_message_stays_held():
+    joints = glitch_reader()
+    joints.update(ARM, list(HOME), [0.0] * 6, 10.000, NOW)
+    for k in range(1, 101):
+        joints.update(ARM, list(HOME + (0.3 if k % 2 else 0.0)), [0.0] * 6, 10.0 + 0.01 * k, NOW + 0.01 * k)
+        assert joints.reading().value is None, f"commanded between glitches after {k} messages"
+
+
+def test_a_jump_that_stays_latches_until_the_state_comes_back_or_an_operator_accepts_it():
+    """The external fuzz run's fault: every joint 0.3 rad off, and it stays. Two states agree from
+    the second message on; what is held is the jump from the last state that could be trusted."""
+    joints = glitch_reader()
+    joints.update(ARM, list(HOME), [0.0] * 6, 10.000, NOW)
+    for k in range(1, 201):  # 1 s of a 200 Hz driver, all at the jumped value
+        joints.update(ARM, list(HOME + 0.3), [0.0] * 6, 10.0 + 0.005 * k, NOW + 0.005 * k)
+        assert joints.reading().value is None, f"commanded from the jumped state after {k} messages"
+    assert "latched" in joints.reading().problem
+    # Back near the trusted state (what the arm could have moved on its last command): clears.
+    joints.update(ARM, list(HOME + 0.05), [0.0] * 6, 11.005, NOW + 1.005)
+    joints.update(ARM, list(HOME + 0.05), [0.0] * 6, 11.010, NOW + 1.010)
+    assert joints.reading().value is not None
+    # A new jump that stays; ~enable (an operator who looked at the arm) accepts it.
+    joints.update(ARM, list(HOME + 0.4), [0.0] * 6, 11.015, NOW + 1.015)
+    joints.update(ARM, list(HOME + 0.4), [0.0] * 6, 11.020, NOW + 1.020)
+    assert joints.reading().value is None
+    assert "no real motion" in joints.accept_current()
+    assert joints.reading().value.positions[0] == pytest.approx(HOME[0] + 0.4)
+    joints.update(ARM, list(HOME + 0.41), [0.0] * 6, 11.025, NOW + 1.025)  # real motion from there on
+    assert joints.reading().problem is None and joints.accept_current() is None
+
+
+def test_a_latched_jump_is_not_cleared_by_joints_it_was_not_about_or_by_half_a_return():
+    joints = glitch_reader()
+    joints.update(ARM, list(HOME), [0.0] * 6, 10.000, NOW)
+    jumped = HOME.copy()
+    jumped[2] += 0.3
+    joints.update(ARM, list(jumped), [0.0] * 6, 10.005, NOW + 0.005)
+    joints.update(list(ROBOT.finger_joint_names), [0.02, 0.02], [0.0, 0.0], 10.010, NOW + 0.010)
+    assert joints.reading().value is None  # a gripper's message says nothing about j3
+    joints.update(ARM[:2], list(HOME[:2]), [0.0] * 2, 10.015, NOW + 0.015)  # a driver split in two: j1, j2 only
+    assert joints.reading().value is None
+    joints.update(ARM[2:], list(HOME[2:]), [0.0] * 4, 10.020, NOW + 0.020)  # j3..j6 back ...
+    assert joints.reading().value is None
+    joints.update(ARM[2:], list(HOME[2:]), [0.0] * 4, 10.025, NOW + 0.025)  # ... and agreeing
+    assert joints.reading().value is not None
 
 
 def test_fast_real_motion_and_repeated_messages_are_no_glitch():

@@ -28,7 +28,11 @@ class MotionGuardSettings:
     :param ramp_time: s over which the velocity limit ramps from 0 to the FR5's after ~enable,
         any hold, or the hand-over from the start move.
     :param glitch_speed_factor: a measured state implying a joint speed above this many times
-        the FR5's limit is a glitch: hold until two consecutive states agree.
+        the arm's rated speed is a jump no real motion makes: hold (latched, see
+        ``jump_recovery_window``).
+    :param jump_recovery_window: s the arm can have gone on moving on its last command after a
+        jump made the node hold; a latched jump clears when every joint is back within rated
+        speed x this of the last state it trusted (a one-message spike), or on ``~enable``.
     :param start_speed: rad/s of the slowest-joint-synchronised start move (at most 0.3).
     :param start_arrival: rad from the start pose (every joint) at which the start move hands
         over to the policy ...
@@ -41,6 +45,7 @@ class MotionGuardSettings:
     joint_limit_margin: float
     ramp_time: float
     glitch_speed_factor: float
+    jump_recovery_window: float
     start_speed: float
     start_arrival: float
     start_settle_speed: float
@@ -49,7 +54,8 @@ class MotionGuardSettings:
     def check(self, source: str) -> None:
         check_positive(source, **{"guard.ramp_time": self.ramp_time, "guard.start_speed": self.start_speed,
                                   "guard.start_arrival": self.start_arrival,
-                                  "guard.start_settle_speed": self.start_settle_speed})
+                                  "guard.start_settle_speed": self.start_settle_speed,
+                                  "guard.jump_recovery_window": self.jump_recovery_window})
         if self.start_speed > 0.3:
             raise ConfigError(f"{source}: 'guard.start_speed' {self.start_speed} rad/s: the start move is a slow "
                               "one, at most 0.3 rad/s")

@@ -2,7 +2,8 @@
 """rostest node: counts the simulator's episode outcomes and checks the success rate.
 
 Params: ~episodes (how many to watch), ~min_success_rate, ~command_topic, and optionally
-~joint_states_topic with ~joint_names (the exact set of names every message must carry). Every
+~joint_states_topic with ~joint_names (the exact set of names every message must carry) and
+~no_warnings (a nominal run: no node may log a WARN or worse on /rosout while it lasts). Every
 command seen on the way must be a valid command (6 finite values inside the joint limits of the
 arm the launch describes: /robot_description names it).
 """
@@ -13,6 +14,7 @@ import numpy as np
 import rospy
 import rostest
 from sensor_msgs.msg import JointState
+from rosgraph_msgs.msg import Log
 from std_msgs.msg import Float64MultiArray, String
 
 from fr5_rl.config import load_robot_spec
@@ -44,6 +46,10 @@ class TestClosedLoop(unittest.TestCase):
         if expected_names:
             rospy.Subscriber(rospy.get_param("~joint_states_topic"), JointState,
                              lambda m: names_seen.add(tuple(sorted(m.name))), queue_size=50)
+        warnings = []
+        if rospy.get_param("~no_warnings", False):
+            rospy.Subscriber("/rosout", Log, lambda m: warnings.append(f"[{m.name}] {m.msg}")
+                             if m.level >= Log.WARN else None, queue_size=200)
         deadline = rospy.get_time() + 220.0
         while len(outcomes) < episodes and rospy.get_time() < deadline and not rospy.is_shutdown():
             rospy.sleep(0.2)
@@ -55,6 +61,7 @@ class TestClosedLoop(unittest.TestCase):
         self.assertEqual(bad_commands, [], "invalid commands were published")
         if expected_names:
             self.assertEqual(names_seen, {tuple(sorted(expected_names))}, "joint_states carried other joints")
+        self.assertEqual(warnings, [], "a nominal run logged warnings or errors")
         self.assertGreaterEqual(successes / episodes, min_rate,
                                 f"success {successes}/{episodes} below {min_rate:.0%}: {watched}")
 

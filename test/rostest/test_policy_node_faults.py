@@ -14,6 +14,7 @@ import unittest
 import numpy as np
 import rospy
 import rostest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Log
 from sensor_msgs.msg import JointState
@@ -96,6 +97,9 @@ class RobotAndCamera:
             if self.glitch_next:
                 for name in self.spec.joint_names:
                     message.position[message.name.index(name)] += 0.3
+        elif self.joint_mode == "jump_stay":  # every joint reads 0.3 rad off, and stays so (an encoder fault)
+            for name in self.spec.joint_names:
+                message.position[message.name.index(name)] += 0.3
         elif self.joint_mode == "split":  # arm and fingers from two drivers, in separate messages
             fingers = set(self.spec.finger_joint_names)
             for keep in (lambda n: n not in fingers, lambda n: n in fingers):
@@ -137,6 +141,10 @@ class TestPolicyNodeFaults(unittest.TestCase):
         warnings = []
         rospy.Subscriber("/rosout", Log, lambda m: warnings.append((rospy.get_time(), m.msg))
                          if m.name.endswith("fr5_policy") and m.level >= Log.WARN else None, queue_size=200)
+        diagnostics = []  # (time, level, message) of the policy node's status
+        rospy.Subscriber("/diagnostics", DiagnosticArray, lambda m: diagnostics.extend(
+            (rospy.get_time(), status.level, status.message) for status in m.status
+            if status.name == "fr5_rl policy_node"), queue_size=20)
         enable = rospy.ServiceProxy("/fr5_policy/enable", SetBool)
         enable.wait_for_service(timeout=30.0)
 
@@ -172,6 +180,8 @@ class TestPolicyNodeFaults(unittest.TestCase):
             ("nan target", dict(camera_mode="nan"), "NaN"),
             ("stale joint states", dict(joint_mode="silent"), "stale"),
             ("joint states glitching", dict(joint_mode="glitch"), "no real motion"),
+            # Two states agree from the second on; the jump from the last trusted one still holds.
+            ("joint states jumped and stay", dict(joint_mode="jump_stay"), "latched"),
             ("stale target", dict(camera_mode="silent", settle=0.8), "stale"),
         ]
         for name, modes, reason in faults:
@@ -182,6 +192,10 @@ class TestPolicyNodeFaults(unittest.TestCase):
             self.assertEqual(count, 0, f"'{name}': {count} commands published while inputs were bad")
             self.assertTrue(any(reason in text for text in reasons),
                             f"'{name}': no warning mentioning '{reason}' (got {reasons[:3]})")
+            if modes.get("joint_mode") == "jump_stay":  # a fault for someone to look at, on /diagnostics
+                self.assertTrue(any(level == DiagnosticStatus.ERROR and "latched" in text
+                                    for t, level, text in diagnostics if t >= rospy.get_time() - 1.5),
+                                f"no ERROR on /diagnostics for the latched jump: {diagnostics[-3:]}")
         count, window, _ = phase("recovered", 1.0)
         self.assertGreaterEqual(count, 0.6 * 50 * window, "the node did not recover after the last fault")
         # Arm and fingers in separate messages is no fault: merged by name, commands keep flowing.

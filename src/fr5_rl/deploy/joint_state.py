@@ -107,9 +107,13 @@ class JointStateReader:
     ``estimate_interval``: a driver publishing faster than the environment samples (a 200 Hz
     simulator against one sample a control period) would otherwise divide a message's jitter by
     5 ms instead of 20. A message
-    whose arm positions imply a speed above ``max_joint_speeds`` (an encoder or driver glitch)
-    holds the arm until two consecutive messages agree again. Thread-safe: ROS callbacks update,
-    the timer reads.
+    whose arm positions imply a speed above ``max_joint_speeds`` from the last state the reader
+    trusted (an encoder or driver fault) latches a hold: it clears only when every arm joint
+    reads back within ``max_joint_speeds`` x ``recovery_window`` of that trusted state, in a
+    message that agrees with the one before it (a one-message spike), or when an operator vouches for the state as it stands
+    (:meth:`accept_current`, the policy node's ``~enable``). A reading that jumps and stays is
+    as much a fault as one that jumps back: commanding from it would move the arm by the jump.
+    Thread-safe: ROS callbacks update, the timer reads.
 
     :param arm_joint_names: the arm's joints in controller order (``j1`` … ``j6``).
     :param finger_joint_names: the gripper's finger joints (their sum is the opening width).
@@ -118,18 +122,24 @@ class JointStateReader:
         None: no check.
     :param estimate_interval: s an estimate spans at least (the sample before that is kept):
         most of the control period the policy was trained at; 0 takes consecutive messages.
+    :param recovery_window: s the arm can have gone on moving after a jump made the node hold
+        (on its last command); bounds how far from the trusted state a reading may come back.
     """
 
     def __init__(self, arm_joint_names: Sequence[str], finger_joint_names: Sequence[str],
                  velocities_from_positions: bool = False, max_joint_speeds: Optional[Sequence[float]] = None,
-                 estimate_interval: float = 0.0) -> None:
+                 estimate_interval: float = 0.0, recovery_window: float = 0.04) -> None:
         self.arm_joint_names = tuple(arm_joint_names)
         self.finger_joint_names = tuple(finger_joint_names)
         self._known = set(self.arm_joint_names) | set(self.finger_joint_names)
         self._velocities_from_positions = velocities_from_positions
         self._max_speed = (dict(zip(self.arm_joint_names, (float(v) for v in max_joint_speeds)))
                            if max_joint_speeds is not None else {})
-        self._glitch: Optional[Tuple[str, float]] = None  # why, and when it came
+        self._recovery_window = float(recovery_window)
+        # name -> (position rad, header stamp s): the newest arm state that passed the speed check
+        self._trusted: Dict[str, Tuple[float, float]] = {}
+        self._latch: Optional[Tuple[str, float]] = None  # why, and when it came
+        self._off: Set[str] = set()  # latched: the joints not yet back near their trusted positions
         # name -> (position rad|m, velocity, stamp or arrival s (for velocity estimates), received s,
         # header stamp s or 0)
         self._joints: Dict[str, Tuple[float, float, float, float, float]] = {}
@@ -156,15 +166,26 @@ class JointStateReader:
                 self._problem = (problem, received, about)
                 return problem
             header_stamp, stamp = stamp, stamp or received
-            jump = None
+            jump, checked = None, {}
             for index, name in enumerate(names):
                 if name not in self._known:
                     continue  # other joints on the topic are none of the policy's business
                 position = float(positions[index])
                 previous = self._joints.get(name)
                 # Judged on header stamps only: arrival times bunch up behind a busy network.
-                if jump is None and previous is not None and header_stamp > 0.0 and previous[4] > 0.0:
-                    jump = self._implausible(name, position - previous[0], stamp - previous[2])
+                if name in self._max_speed and header_stamp > 0.0:
+                    checked[name] = position
+                    trusted = self._trusted.get(name)
+                    if trusted is not None and self._latch is None and jump is None:
+                        jump = self._implausible(name, position - trusted[0], header_stamp - trusted[1])
+                    elif trusted is not None and self._latch is not None:
+                        # Back where the arm can be, and agreeing with the message before (a driver
+                        # glitching every other message stays held).
+                        bound = self._max_speed[name] * min(max(header_stamp - trusted[1], 0.0), self._recovery_window)
+                        back = abs(position - trusted[0]) <= bound + 1e-9
+                        if back and previous is not None and previous[4] > 0.0:
+                            back = self._implausible(name, position - previous[0], header_stamp - previous[4]) is None
+                        (self._off.discard if back else self._off.add)(name)
                 if len(velocities) == len(names) and not self._velocities_from_positions:
                     velocity = float(velocities[index])
                 elif previous is None or name in self._restarted:
@@ -176,9 +197,15 @@ class JointStateReader:
                     reference = self._reference_for(name, (previous[0], previous[2]), stamp)
                     velocity = velocity_from_positions(position, reference[0], stamp - reference[1], previous[1])
                 self._joints[name] = (position, velocity, stamp, received, header_stamp)
-            # Held from a jump until a message agrees with the one before it: the jump back from
-            # a glitch is implausible too, the next real state is not.
-            self._glitch = (jump, received) if jump is not None else None
+            if jump is not None:
+                self._latch = (f"{jump}; latched: holding until every joint reads back near its last trusted "
+                               "position, or ~enable is called", received)
+                self._off = {name for name in checked if name in self._trusted}
+            elif self._latch is not None and not self._off:
+                self._latch = None  # back where the arm could be: a one-message spike
+            if self._latch is None:
+                for name, position in checked.items():
+                    self._trusted[name] = (position, header_stamp)
             if self._problem is not None and self._problem[2] <= set(names):
                 self._problem = None  # a good message brought every joint the bad one was about
         return None
@@ -206,16 +233,37 @@ class JointStateReader:
         with self._lock:
             self._restarted = set(self._known)
 
+    def accept_current(self) -> Optional[str]:
+        """An operator vouches that the arm stands where the newest joint states say (it was
+        moved by hand, a simulator placed it): a latched jump clears and the current arm
+        positions become the trusted ones.
+
+        :return: the jump that was latched, or None.
+        """
+        with self._lock:
+            latched = self._latch[0] if self._latch is not None else None
+            self._latch, self._off = None, set()
+            for name in self._max_speed:
+                entry = self._joints.get(name)
+                if entry is not None and entry[4] > 0.0:
+                    self._trusted[name] = (entry[0], entry[4])
+        return latched
+
+    def latched_jump(self) -> Optional[str]:
+        """Why the reader holds on a jump, or None."""
+        with self._lock:
+            return self._latch[0] if self._latch is not None else None
+
     def _implausible(self, name: str, moved: float, elapsed: float) -> Optional[str]:
         """Why a joint's move since its last message cannot be real motion, or None."""
         limit = self._max_speed.get(name)
         if limit is None or abs(moved) <= 1e-9:
             return None
         if elapsed < MIN_SAMPLE_INTERVAL:
-            return f"{name} moved {moved:+.3f} rad within one stamp: holding until two states agree"
+            return f"{name} moved {moved:+.3f} rad within one stamp (no real motion)"
         if abs(moved) / elapsed > limit:
             return (f"{name} moved {moved:+.3f} rad in {elapsed * 1000:.0f} ms ({abs(moved) / elapsed:.1f} rad/s "
-                    f"> {limit:.1f} rad/s, no real motion): holding until two states agree")
+                    f"> {limit:.1f} rad/s, no real motion)")
         return None
 
     def _check(self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float]) -> Optional[str]:
@@ -243,8 +291,8 @@ class JointStateReader:
         with self._lock:
             if self._problem is not None:
                 return Reading(None, self._problem[1], self._problem[0])
-            if self._glitch is not None:
-                return Reading(None, self._glitch[1], self._glitch[0])
+            if self._latch is not None:
+                return Reading(None, self._latch[1], self._latch[0])
             missing = [name for name in self.arm_joint_names if name not in self._joints]
             if len(missing) == len(self.arm_joint_names):
                 return None  # nothing of the arm yet (the gripper's driver may be first)

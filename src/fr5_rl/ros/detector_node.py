@@ -216,6 +216,14 @@ class DetectorNode:
 
     def on_frame(self, color: Image, depth: Image, info: CameraInfo) -> None:
         """One synchronised frame: refuse, or detect (and track) and publish."""
+        try:
+            self.handle_frame(color, depth, info)
+        except rospy.ROSException:
+            if not rospy.is_shutdown():
+                raise
+            # A frame still in hand when the node shuts down: its topics are closed, nothing lost.
+
+    def handle_frame(self, color: Image, depth: Image, info: CameraInfo) -> None:
         self.last_frame = time.monotonic()
         started = time.perf_counter()
         age = rospy.Time.now().to_sec() - color.header.stamp.to_sec()

@@ -136,7 +136,8 @@ class PolicyNode:
                                        max_joint_speeds=(robot.velocity_limits * params.guard.glitch_speed_factor
                                                          if params.motion_guard else None),
                                        # the environment estimates from one sample a control period
-                                       estimate_interval=0.9 * self.control_dt)
+                                       estimate_interval=0.9 * self.control_dt,
+                                       recovery_window=params.guard.jump_recovery_window)
         self.gripper_fault: Optional[str] = None
         self.joint_state_stamp = rospy.Time(0)
         self.target: Optional[PoseStamped] = None
@@ -208,9 +209,17 @@ class PolicyNode:
                                   "faulted: the gripper bridge's ~status says which)" if message.data else None)
 
     def on_enable(self, request) -> SetBoolResponse:
+        """Pause or resume. Resuming is an operator's word that the arm stands where its joint
+        states say: a latched jump clears. The answer says the state before, e.g. ``"enabled
+        (was disabled)"``, so a caller that paused can restore what it found."""
         with self.inputs_changed:
+            before = self.step.enabled
             self.step.enabled = bool(request.data)
-        return SetBoolResponse(success=True, message="enabled" if self.step.enabled else "disabled")
+            cleared = self.reader.accept_current() if request.data else None
+        if cleared is not None:
+            rospy.loginfo(f"policy_node: ~enable: the joint state as it stands is accepted (it had jumped: {cleared})")
+        return SetBoolResponse(success=True, message=f"{'enabled' if self.step.enabled else 'disabled'} "
+                                                     f"(was {'enabled' if before else 'disabled'})")
 
     def on_reset(self, _request) -> TriggerResponse:
         """Start as a new episode; with the motion guard, answer once the arm stands in the
@@ -363,8 +372,9 @@ class PolicyNode:
         # At once when the kind of problem changes, then at most every 2 s. A pause asked for
         # through ~enable is no problem, said once; so is an input not yet come while the other
         # nodes start (~startup_grace), which every launch goes through; a gripper still
-        # activating then is no fault either.
-        starting = (hold.reason in (HoldReason.NO_JOINT_STATE, HoldReason.NO_TARGET, HoldReason.GRIPPER_FAULT)
+        # activating, or a camera frame whose static transform has not come yet, is no fault either.
+        starting = (hold.reason in (HoldReason.NO_JOINT_STATE, HoldReason.NO_TARGET, HoldReason.GRIPPER_FAULT,
+                                    HoldReason.TARGET_UNAVAILABLE)
                     and time.monotonic() - self.started < self.params.startup_grace)
         if hold.reason is HoldReason.DISABLED or starting:
             if previous is None or previous.reason != hold.reason:
@@ -388,7 +398,11 @@ class PolicyNode:
     def publish_diagnostics(self, event) -> None:
         status = DiagnosticStatus(name="fr5_rl policy_node", hardware_id="fr5")
         hold = self.step.last_hold
-        if hold is not None:
+        latched = self.reader.latched_jump()
+        if latched is not None:  # a fault, not a wait: someone must look at the arm
+            status.level, status.message = DiagnosticStatus.ERROR, f"holding: {latched}"
+            status.values.append(KeyValue("joint_state_jump", latched))
+        elif hold is not None:
             status.level, status.message = DiagnosticStatus.WARN, f"holding: {hold}"
         else:
             status.level, status.message = DiagnosticStatus.OK, "running"

@@ -111,6 +111,7 @@ class SimNodeParams:
     lockstep_gripper: bool
     policy_reset_service: str
     policy_enable_service: str
+    teleport_settle_time: float
     episode_start: str
     first_command_timeout: float
     outcome_log: str
@@ -135,9 +136,9 @@ class SimNodeParams:
         check_positive(source, publish_rate=self.publish_rate, physics_dt=self.physics_dt, camera_rate=self.camera_rate,
                   marker_rate=self.marker_rate, solver_iterations=self.solver_iterations)
         if min(self.episodes, self.camera_noise_std, self.pause_between_episodes, self.reset_settle_time,
-               self.first_command_timeout) < 0:
-            raise ConfigError(f"{source}: episodes, camera_noise_std, pause_between_episodes, reset_settle_time "
-                              "and first_command_timeout must be >= 0")
+               self.first_command_timeout, self.teleport_settle_time) < 0:
+            raise ConfigError(f"{source}: episodes, camera_noise_std, pause_between_episodes, reset_settle_time, "
+                              "first_command_timeout and teleport_settle_time must be >= 0")
 
 
 class SimulatorNode:
@@ -228,6 +229,8 @@ class SimulatorNode:
         self.positioning = False
         self.episode_starts = 0
         self.uncommanded_since: Optional[float] = None  # real time: monotonic s the episode has waited for a command
+        # Real time: the policy node was paused (it was enabled) for a teleport, to resume before its ~reset.
+        self.resume_after_teleport = False
 
         # ---- ROS interfaces
         self.joint_pub = rospy.Publisher(params.joint_states_topic, JointState, queue_size=10)
@@ -458,6 +461,8 @@ class SimulatorNode:
             self.env.reset(seed=self.params.seed + self.episode,
                            options={"arm_positions": self.env.joint_positions().tolist()})
         else:
+            if self.episode > 0 and not self.params.lockstep:
+                self._pause_policy_for_teleport()
             self.env.reset(seed=self.params.seed + self.episode)
         self.arm_command = None
         self.arriving.clear()
@@ -484,6 +489,8 @@ class SimulatorNode:
         self.holding, self.settling = False, False
         self.hold_until = 0.0
         if self.reset_policy is None:
+            if self.resume_after_teleport:
+                threading.Thread(target=self._resume_policy_after_teleport, daemon=True).start()
             return
         if not self.params.lockstep:
             # A driver never stops publishing: the loop runs on while the policy node answers
@@ -519,11 +526,40 @@ class SimulatorNode:
         moving = len(self.gripper_arriving) > 0 or any(abs(speed) > 1e-3 for speed in states.velocities[arm:])
         self.controller.set_measured_width(sum(states.positions[arm:]), moving=moving)
 
+    def _pause_policy_for_teleport(self) -> None:
+        """Real time (lock held), before the arm is teleported: pause the policy node, as an
+        operator does before moving the arm by hand. A teleport is no motion: to the policy node's
+        joint-state check it is a jump, which holds latched until ~enable vouches for the new
+        state (:meth:`_reset_policy_then_start` resumes it). A node paused by someone else stays so."""
+        self.resume_after_teleport = False
+        if not self.params.policy_enable_service:
+            return
+        try:
+            answer = rospy.ServiceProxy(self.params.policy_enable_service, SetBool)(False)
+        except (rospy.ServiceException, rospy.ROSException):
+            return  # no policy node (yet), or one without ~enable
+        self.resume_after_teleport = "(was enabled)" in answer.message
+
+    def _resume_policy_after_teleport(self) -> None:
+        """Real time (own thread): once the teleported state has reached the policy node (states
+        flow at the publish rate; ``~teleport_settle_time`` covers their way), resume it: its
+        ~enable accepts the new state as the arm's."""
+        with self.lock:
+            resume, self.resume_after_teleport = self.resume_after_teleport, False
+        if not resume:
+            return
+        time.sleep(self.params.teleport_settle_time)
+        try:
+            rospy.ServiceProxy(self.params.policy_enable_service, SetBool)(True)
+        except (rospy.ServiceException, rospy.ROSException) as error:
+            rospy.logdebug(f"sim_node: could not resume the policy node after the teleport: {error}")
+
     def _reset_policy_then_start(self, start: int) -> None:
         """Real time (a thread of its own): the policy node's ~reset, which answers at once, or
         with its motion guard once the arm stands in the training start distribution; the
         episode starts with the next command, unless another start (``episode_starts``) came
         meanwhile."""
+        self._resume_policy_after_teleport()
         try:
             if self.params.episode_start == "go_to_start":  # at start-up the policy node may still come
                 rospy.wait_for_service(self.params.policy_reset_service, timeout=120.0)
