@@ -291,10 +291,12 @@ def test_batch_error_suggests_settings_that_are_accepted():
 
 
 def test_shipped_hyperparameters_pass_their_checks():
-    # <algo>_<task>.yaml, and variants such as ppo_reach_finetune.yaml
-    shipped = [(path.stem.split("_"), path) for path in (package_root() / "config").glob("*_*.yaml")
+    # <algo>_<task>.yaml, and the recipes' stages and variants such as recipes/ppo_reach_finetune.yaml
+    config = package_root() / "config"
+    shipped = [(path.stem.split("_"), path) for path in [*config.glob("*_*.yaml"), *config.glob("recipes/*_*.yaml")]
                if path.stem.split("_")[0] in ("ppo", "sac", "td3", "tqc")]
     assert ["ppo", "reach"] in [parts for parts, _ in shipped]
+    assert ["ppo", "grasp", "fr5"] in [parts for parts, _ in shipped]  # the shipped grasp model's last stage
     for (algo, task, *_variant), path in shipped:
         hyper = load_hyperparameters(algo, task, str(path))
         check_hyperparameters(algo, hyper, hyper.n_envs)

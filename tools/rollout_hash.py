@@ -57,7 +57,7 @@ def rollout_digest(task: str, overrides: Mapping[str, Any], act: Callable[[np.nd
     return {"sha256": digest.hexdigest(), "steps": steps, "successes": successes}
 
 
-# The randomisation of config/ppo_grasp_robust.yaml, written out so the digest does not move
+# The randomisation of config/recipes/ppo_grasp_robust.yaml, written out so the digest does not move
 # when config files do.
 SHIPPED_RANDOMISATION = {
     "enabled": True, "action_latency_steps": [0, 2], "command_delay_s": [0.0, 0.02],

@@ -56,7 +56,7 @@ def config_path(name: str) -> Path:
 
 # libyaml's parser where PyYAML was built with it: the same constructors (the same values, which
 # a test checks for every shipped file), a tenth of the time. Every environment reads env.yaml
-# and robot.yaml: with the pure-Python parser a reach environment took 21-29 ms to build, with
+# and robots/<arm>.yaml: with the pure-Python parser a reach environment took 21-29 ms to build, with
 # libyaml's 10.8 ms, and a 32-environment run builds 21 before its first step.
 _YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 

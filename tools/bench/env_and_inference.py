@@ -6,7 +6,7 @@
     python tools/bench/env_and_inference.py --model runs/reach_ppo_x/final
 
 Environment speed, for FR5Reach-v0 and FR5Grasp-v0 in one process, each plain (env.yaml) and
-randomised (the env overrides of config/ppo_reach.yaml and config/ppo_grasp_chain.yaml): random
+randomised (the env overrides of config/ppo_reach.yaml and config/recipes/ppo_grasp_chain.yaml): random
 actions in [-1, 1] with a reset whenever an episode ends (resets are part of the timed loop,
 warm-up steps are not), median of the repeats:
 

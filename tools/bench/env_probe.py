@@ -8,7 +8,7 @@ alternately, so that both are timed on the same machine in the same minutes.
 Random actions in [-1, 1] (seeded), a reset whenever an episode ends (timed, as in the env
 bench), after untimed warm-up steps. ``randomised`` takes the ``env`` section of the task's
 training file from the imported package's own config (config/ppo_reach.yaml,
-config/ppo_grasp_chain.yaml), read with PyYAML so that old and new code read it alike. Prints
+config/recipes/ppo_grasp_chain.yaml), read with PyYAML so that old and new code read it alike. Prints
 one JSON line. Uses only ``FR5Env(task, config)``, ``reset(seed=)`` and ``step``: the API every
 release has.
 """
@@ -41,7 +41,11 @@ def main() -> int:
 
     overrides = None
     if args.variant == "randomised":
-        with open(package_root() / "config" / f"{RANDOMISED_FROM[args.task]}.yaml", encoding="utf-8") as handle:
+        name = f"{RANDOMISED_FROM[args.task]}.yaml"
+        path = package_root() / "config" / name  # a release before config/recipes/ held its stages here
+        if not path.is_file():
+            path = package_root() / "config" / "recipes" / name
+        with open(path, encoding="utf-8") as handle:
             overrides = yaml.safe_load(handle).get("env")
     env = FR5Env(args.task, overrides)
     actions = np.random.default_rng(args.seed).uniform(-1.0, 1.0, (args.warmup + args.steps, 7)).astype(np.float32)

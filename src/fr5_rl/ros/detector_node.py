@@ -105,7 +105,7 @@ class FingerWidths:
     stamp among the finger joints; others (the arm driver's j1..j6) add nothing. One topic that
     carries every joint gives exactly each message's own stamp and finger sum.
 
-    :param finger_names: the finger joints (config/robot.yaml).
+    :param finger_names: the finger joints (config/gripper.yaml).
     :param length: how many openings to keep (about 2 s of a 200 Hz topic).
     """
 

@@ -11,7 +11,7 @@ the network.
 In position mode the bridge reads the fingers back (``GetGripperCurPosition``, SDK >= 2.1.2) at
 ``~readback_rate``, ignores the controller's transient 0 right after a move (``~zero_debounce``)
 and publishes ``~joint_states_topic`` (sensor_msgs/JointState: the two finger joints of
-config/robot.yaml, each at width / 2, no velocities, stamped at the read). ``~fault_topic``
+config/gripper.yaml, each at width / 2, no velocities, stamped at the read). ``~fault_topic``
 (std_msgs/Bool, latched) is true while the gripper cannot act on a width: the controller is
 unreachable (or not yet heard) or reports a gripper fault, or (position mode) the gripper is
 not yet activated or its activation has not settled (``~activation_settle``). The policy node

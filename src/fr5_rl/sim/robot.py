@@ -60,7 +60,7 @@ def cap_joint_speeds(body: int, robot: RobotSpec, client: int) -> None:
     ramps at the gripper's rated speed (:meth:`FR5Robot.command`).
 
     :param body: PyBullet body id of the robot, in ``client``.
-    :param robot: the robot's rated limits (config/robot.yaml).
+    :param robot: the arm's rated limits (config/robots/<arm>.yaml).
     :param client: PyBullet client id.
     """
     p.changeDynamics(body, -1, maxJointVelocity=float(max(robot.velocity_limits)), physicsClientId=client)

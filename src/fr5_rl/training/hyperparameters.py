@@ -141,9 +141,15 @@ class DaggerConfig:
 
 
 def hyperparameter_path(path_or_name: str | Path) -> Path:
-    """A hyperparameter file's path: ``path_or_name`` if it is a file, else ``config/<name>.yaml``."""
+    """A hyperparameter file's path: ``path_or_name`` if it is a file, else ``config/<name>.yaml``
+    (what a user sets: one file per algorithm and task), else ``config/recipes/<name>.yaml`` (the
+    stages and variants of the experiments behind the shipped models)."""
     path = Path(path_or_name)
-    return path if path.is_file() else config_path(str(path_or_name))
+    if path.is_file():
+        return path
+    plain = config_path(str(path_or_name))
+    recipe = config_path(f"recipes/{path_or_name}")
+    return recipe if not plain.is_file() and recipe.is_file() else plain
 
 
 def read_hyperparameter_file(path_or_name: str | Path, _seen: Tuple[Path, ...] = ()) -> Dict[str, Any]:
@@ -155,7 +161,7 @@ def read_hyperparameter_file(path_or_name: str | Path, _seen: Tuple[Path, ...] =
     path = hyperparameter_path(path_or_name).resolve()
     if path in _seen:
         raise ConfigError(f"{path.name}: 'base' leads back to itself ({' -> '.join(p.name for p in (*_seen, path))})")
-    data = load_yaml(path_or_name)
+    data = load_yaml(path)
     base = data.pop("base", None)
     if base is None:
         return data
