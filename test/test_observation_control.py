@@ -8,12 +8,13 @@ control.py, so a change of index, scale or clamping shows up as a failure.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from fr5_rl.config import load_robot_spec, typed
-from fr5_rl.env_config import JointStepHintConfig, ObservationConfig, load_env_config
+from fr5_rl.config import load_robot_spec
+from fr5_rl.env_config import JointStepHintConfig, load_env_config
 from fr5_rl.control import ACTION_SIZE, JointCommandShaper
 from fr5_rl.observation import (
     GRASP_OBSERVATION_SIZE,
@@ -493,15 +494,22 @@ def test_a_malformed_hint_setting_is_refused(bad):
         load_env_config({"observation": {"joint_step_hint": bad}})
 
 
-def test_a_model_from_before_the_hint_is_read_as_having_none():
-    from fr5_rl.observation import observation_size, saved_observation_settings
+def test_a_model_whose_meta_lacks_an_observation_key_is_refused(tmp_path):
+    """No reading of older files with guessed defaults: a meta.json without a key the code needs
+    is named in one refusal (the shipped ones are all current)."""
+    import json
+    import shutil
 
-    old = {key: value for key, value in CFG.to_dict()["observation"].items()
-           if key not in ("previous_actions", "joint_step_hint", "joint_velocity_source")}
-    assert saved_observation_settings(old) == {**old, "previous_actions": 0, "joint_step_hint": None,
-                                               "joint_velocity_source": "measured"}
-    saved = typed(ObservationConfig, saved_observation_settings(old), "meta.json")
-    assert observation_size("reach", saved) == REACH_OBSERVATION_SIZE
+    from fr5_rl.deploy.bundle import ModelFilesError
+    from fr5_rl.deploy.policy import load_policy
+
+    model = tmp_path / "reach"
+    shutil.copytree(Path(__file__).resolve().parent.parent / "models" / "reach", model)
+    meta = json.loads((model / "meta.json").read_text())
+    del meta["env_config"]["observation"]["previous_actions"]
+    (model / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(ModelFilesError, match="observation"):
+        load_policy(model, backend="onnx")
 
 
 def test_tcp_position_and_axis_is_tcp_pose_to_the_bit():

@@ -64,8 +64,8 @@ class ObjectConfig:
     # With the arm left where the last episode ended (a real arm between episodes), a draw that
     # puts the object closer than this (m) to the arm or gripper is drawn again: nobody sets an
     # object down inside the hand, and PyBullet would shoot it out through the table.
-    placement_clearance: float = 0.02
-    placement_attempts: int = 20
+    placement_clearance: float
+    placement_attempts: int
 
     def check(self, source: str) -> None:
         if self.shape not in ("cylinder", "box"):
@@ -73,6 +73,9 @@ class ObjectConfig:
         low, high = self.region_low, self.region_high
         if len(low) != 2 or len(high) != 2 or any(lo >= hi for lo, hi in zip(low, high)):
             raise ConfigError("object.region_low must be below object.region_high (x y, metres)")
+        if self.placement_clearance < 0 or self.placement_attempts < 1:
+            raise ConfigError(f"{source}: 'object.placement_clearance' must be >= 0 m and 'object.placement_attempts' "
+                              f">= 1, got {self.placement_clearance}, {self.placement_attempts}")
 
 
 @dataclass(frozen=True)

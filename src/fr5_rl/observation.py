@@ -45,7 +45,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from collections import deque
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -56,28 +56,6 @@ from .kinematics import ForwardKinematics, solve_linear as _solve
 REACH_OBSERVATION_SIZE = 23  # without previous actions
 GRASP_OBSERVATION_SIZE = 24
 ARM_ACTION_SIZE = 6  # the arm components of the action (the seventh is the gripper)
-
-
-def previous_action_count(obs_cfg: Mapping[str, Any]) -> int:
-    """How many previous actions a model's saved ``observation`` section (``meta.json``) carries.
-
-    A section without the key (a model trained before it existed) carries none.
-    """
-    return int(obs_cfg.get("previous_actions", 0))
-
-
-def joint_step_hint_settings(obs_cfg: Mapping[str, Any]) -> Optional[Mapping[str, Any]]:
-    """A model's saved ``observation.joint_step_hint`` (``meta.json``), or None where it is off
-    (null, or a model trained before the key existed)."""
-    return obs_cfg.get("joint_step_hint") or None
-
-
-def saved_observation_settings(obs_cfg: Mapping[str, Any]) -> Dict[str, Any]:
-    """A model's saved ``observation`` section with the keys added since filled in as that model
-    was built: no previous actions, no joint-step hint, measured joint velocities."""
-    return {**obs_cfg, "previous_actions": previous_action_count(obs_cfg),
-            "joint_step_hint": joint_step_hint_settings(obs_cfg),
-            "joint_velocity_source": obs_cfg.get("joint_velocity_source", "measured")}
 
 
 def observation_size(task: str, obs_cfg: ObservationConfig) -> int:

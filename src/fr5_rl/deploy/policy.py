@@ -24,7 +24,7 @@ import numpy as np
 from ..config import robot_config, robot_names
 from ..env_config import EnvConfig, load_env_config
 from ..control import ACTION_SIZE
-from ..observation import observation_size, saved_observation_settings
+from ..observation import observation_size
 from .bundle import (META_FILE, MODEL_FILE, ONNX_FILE, STATS_FILE, ModelFilesError, algorithm_class,
                      check_files_present, check_sb3_zip, damaged, read_meta, resolve_model_dir)
 
@@ -187,8 +187,6 @@ def config_mismatches(meta: Mapping[str, Any], current_env: Optional[EnvConfig] 
             for key in path:
                 saved = saved.get(key) if isinstance(saved, dict) else None
                 current = current.get(key) if isinstance(current, dict) else None
-            if path == ("observation",) and isinstance(saved, dict):
-                saved = saved_observation_settings(saved)  # a model from before a key existed
             if saved != current:
                 differences.append(f"env {'.'.join(path)}: trained with {saved}, now {current}")
     saved_robot = meta.get("robot_config")

@@ -192,12 +192,16 @@ def added_observation_blocks(source: Dict[str, Any], meta: Dict[str, Any]) -> Li
         model's observation (its length: at the end); empty when nothing is added or the
         layouts differ otherwise.
     """
-    from ..observation import ARM_ACTION_SIZE, joint_step_hint_settings, previous_action_count
+    from ..observation import ARM_ACTION_SIZE
 
     had_cfg = (source.get("env_config") or {}).get("observation") or {}
     has_cfg = meta["env_config"]["observation"]
-    had, has = previous_action_count(had_cfg), previous_action_count(has_cfg)
-    hint_had, hint_has = joint_step_hint_settings(had_cfg) is not None, joint_step_hint_settings(has_cfg) is not None
+    try:
+        had, hint_had = int(had_cfg["previous_actions"]), had_cfg["joint_step_hint"] is not None
+    except KeyError as missing:
+        raise ConfigError(f"--init-from: the model's meta.json has no observation.{missing.args[0]}: it comes from an "
+                          "older fr5_rl; train anew, or use the fr5_rl it was trained with") from None
+    has, hint_has = int(has_cfg["previous_actions"]), has_cfg["joint_step_hint"] is not None
     if has < had or (hint_had and not hint_has):
         return []
     old_size = int(source.get("observation_size") or 0)
