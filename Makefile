@@ -13,8 +13,8 @@ EPISODES ?= 5
 help:
 	@echo "make demo   - set up, then run the closed loop (simulator + policy) with the shipped model"
 	@echo "make test   - set up, then run the whole test suite (pytest + rostest)"
-	@echo "make test-fast - set up, then only the pure-logic tests (no training, Ray, roscore or model sweeps; < 90 s)"
-	@echo "make lint   - set up, then catkin_lint and ruff (config: ruff.toml)"
+	@echo "make test-fast - set up, then only the pure-logic tests (no training, Ray, roscore, lint or command lines; < 60 s)"
+	@echo "make lint   - set up, then catkin_lint, ruff (config: ruff.toml), and the URDF, launch-file and command-line checks"
 	@echo "make bench  - set up, then run the benchmarks; figures printed and written to bench/results/"
 	@echo "make bench-ray - set up, then the Ray Tune bench (1 vs 2 nodes, ASHA vs full); BENCH_ARGS=--quick"
 	@echo "make train  - set up, then train (TASK=reach|grasp ALGO=ppo|sac|td3|tqc ROBOT=fr3|fr5|fr10|fr16|fr20|fr30)"
@@ -30,10 +30,11 @@ demo: setup
 test: setup
 	@$(ENV) bash tools/run_tests.sh
 
-# The inner loop: tests marked `slow` (training runs, model sweeps, Ray clusters, roscore) are
-# left out; `make test` runs them all.
+# The inner loop, pure logic: tests marked `slow` (training runs, model sweeps, Ray clusters,
+# roscore) or `integration` (lint, URDF checks, launch parsing, command lines) are left out;
+# `make lint` runs the latter, `make test` runs them all.
 test-fast: setup
-	@$(ENV) python -m pytest -q -m "not slow" test/
+	@$(ENV) python -m pytest -q -m "not slow and not integration" test/
 
 # Env speed + inference latency, the ROS loop (timing, sim-to-ROS parity, one core busy), the
 # FAIRINO driver's timing emulated over 200 episodes, lockstep
@@ -74,7 +75,7 @@ meshes: setup
 	@$(ENV) python tools/generate_description.py
 
 lint: setup
-	@$(ENV) catkin_lint -W1 . && ruff check .
+	@$(ENV) catkin_lint -W1 . && ruff check . && python -m pytest -q -m integration test/
 
 clean:
 	@bash tools/setup.sh --clean

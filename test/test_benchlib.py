@@ -323,6 +323,7 @@ def test_only_the_helper_starts_roslaunch_or_reads_its_printed_outcomes(tmp_path
 TOOL_SCRIPTS = sorted([*TOOLS.glob("*.py"), *(TOOLS / "bench").glob("*.py")])
 
 
+@pytest.mark.integration  # command lines in new interpreters: `make lint`
 @pytest.mark.parametrize("script", [path for path in TOOL_SCRIPTS if "argparse" in path.read_text(encoding="utf-8")],
                          ids=lambda path: str(path.relative_to(TOOLS)))
 def test_every_tool_with_a_command_line_starts(script):
@@ -336,6 +337,7 @@ def test_every_tool_with_a_command_line_starts(script):
     assert "usage" in result.stdout.lower()
 
 
+@pytest.mark.integration  # command lines in new interpreters: `make lint`
 # ----------------------------------------------------------------------------- the release to compare against
 def test_reference_tree_runs_that_commit_s_code_not_this_checkout(tmp_path, monkeypatch):
     """The old-against-new benches (issue #30) run a commit's export; a child given

@@ -182,6 +182,7 @@ def floats(text: str) -> List[float]:
 
 
 # ----------------------------------------------------------------- structure
+@pytest.mark.integration  # an external tool: `make lint`
 @pytest.mark.parametrize("name", ROBOTS)
 def test_check_urdf_accepts_it(name: str) -> None:
     exe = shutil.which("check_urdf")
@@ -459,6 +460,7 @@ def test_no_self_collision_at_home(arm) -> None:
 
 
 # ----------------------------------------------------------------- generator
+@pytest.mark.integration  # the generator's command line: `make lint`
 def test_generator_reproduces_committed_files(tmp_path: Path) -> None:
     res = subprocess.run([sys.executable, str(GENERATOR), "--out-dir", str(tmp_path)],
                          capture_output=True, text=True, cwd=str(tmp_path))

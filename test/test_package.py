@@ -8,6 +8,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
+# catkin_lint, ruff, roslaunch's loader, rosrun, the package's files: `make lint` and `make test`.
+pytestmark = pytest.mark.integration
 
 
 def test_catkin_lint_reports_no_problems():

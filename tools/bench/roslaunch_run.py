@@ -11,7 +11,7 @@
 ``roslaunch -p PORT fr5_rl sim_policy.launch ARG:=VALUE ... outcome_log:=FILE`` starts on its
 own ROS master, headless. The simulator node (``~outcome_log``, config/sim_node.yaml) appends
 each episode's outcome to FILE as one JSON line (src/fr5_rl/ros/sim_node.py
-``_finish_episode``)::
+``finish_episode``)::
 
     {"episode": 1, "seed": 700000, "success": true, "failure": "", "steps": 57, "sim_time": 2.36}
 

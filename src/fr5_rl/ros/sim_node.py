@@ -37,7 +37,9 @@ Two ways to pace the world:
   episode, faster than real time.
 
 The node is input and output only: the simulation, the episode verdict and the scene all come
-from :class:`fr5_rl.envs.FR5Env`'s public API.
+from :class:`fr5_rl.envs.FR5Env`'s public API. This module holds its parameters, its constructor,
+its callbacks and the episode bookkeeping both loops share; each loop is a class in
+:mod:`fr5_rl.ros.sim_loops`.
 """
 from __future__ import annotations
 
@@ -64,11 +66,12 @@ from ..config import ConfigError, check_positive, check_time_constants, whole_mu
 from ..deploy.bundle import ModelFilesError, task_and_arm
 from ..envs import EpisodeVerdict, FR5Env, JointStates
 from ..sim.controller_emulator import ControllerEmulator, ControllerEmulatorSettings
-from ..sim.pacing import AlignedStepSchedule, ArrivalQueue, StepSchedule, TimeSchedule, WallClockPacer
+from ..sim.pacing import ArrivalQueue
 from ..sim.servo import FirstOrderResponse, ServoCycle
 from ..transforms import load_static_transforms, matrix_from_quaternion, quaternion_from_matrix, transform_in
 from .params import exit_if_help_asked, node_parameters
-from .sim_messages import joint_state_message, object_marker, scene_markers
+from .sim_loops import LockstepLoop, RealTimeLoop
+from .sim_messages import joint_state_message, object_marker
 from .lifetime import init_node
 
 
@@ -228,7 +231,6 @@ class SimulatorNode:
         # start move runs (commands obeyed, the episode not yet timed) until it answers.
         self.positioning = False
         self.episode_starts = 0
-        self.uncommanded_since: Optional[float] = None  # real time: monotonic s the episode has waited for a command
         # Real time: the policy node was paused (it was enabled) for a teleport, to resume before its ~reset.
         self.resume_after_teleport = False
 
@@ -254,9 +256,9 @@ class SimulatorNode:
         rospy.Service("~calibration", SetBool, self._on_calibration)
         if not params.lockstep:  # lockstep starts its first episode once the policy node is up
             with self.lock:
-                self._start_episode()
+                self.start_episode()
 
-    # ------------------------------------------------------------------ real time
+    # ------------------------------------------------------------------ the run
     def end_of_run(self) -> None:
         """After the last episode: pause the policy (it would hold, warning of stale joint states,
         once the simulator has gone) and end the launch that started this node as a finished run,
@@ -276,186 +278,15 @@ class SimulatorNode:
 
     def spin(self) -> None:
         """Step physics and publish until shutdown or the last episode, then print the result."""
-        if self.params.lockstep:
-            self._spin_lockstep()
-        else:
-            self._spin_real_time()
+        (LockstepLoop if self.params.lockstep else RealTimeLoop)(self).run()
         if self.params.episodes > 0 and self.results:
             print(f"success rate: {sum(self.results)}/{len(self.results)}", flush=True)
 
-    def _spin_real_time(self) -> None:
-        """Simulated time is kept locked to the wall clock, as a real arm's would be
-        (:class:`~fr5_rl.sim.pacing.WallClockPacer`): when the loop wakes late (a loaded machine),
-        the missed physics steps are run before publishing, so a command always acts for as long
-        in simulation as it did in reality. Every ``control_dt`` of simulated time after the
-        first command, the environment judges the episode."""
-        params, env = self.params, self.env
-        rate = rospy.Rate(1.0 / self.physics_dt)
-        pacer = WallClockPacer(self.physics_dt, max_catch_up=10 * self.steps_per_publish)
-        ros_minus_monotonic = rospy.Time.now().to_sec() - time.monotonic()
-        judge = StepSchedule(whole_multiple(env.control_dt, self.physics_dt) or 1)
-        publish = AlignedStepSchedule(self.steps_per_publish)
-        camera, markers = TimeSchedule(1.0 / params.camera_rate), TimeSchedule(1.0 / params.marker_rate)
-        while not rospy.is_shutdown():
-            with self.lock:
-                if self.holding and time.monotonic() >= self.hold_until:
-                    if self.settling:
-                        self._begin_episode()
-                    elif 0 < params.episodes <= self.episode:
-                        break
-                    else:
-                        self._start_episode(settle=params.reset_settle_time)
-                if self.controller is not None:
-                    self._take_controller_command()
-                self._end_if_never_commanded(pacer.sim_time)
-                if not self.holding:
-                    self.loop_lateness.append(pacer.lateness())
-                for step in pacer.due_steps():
-                    step_start = pacer.wall_time - self.physics_dt
-                    arm_command = self.arriving.due(step_start)
-                    if arm_command is not None:
-                        self.arm_command = arm_command
-                    gripper_target = self.gripper_arriving.due(step_start)
-                    if gripper_target is not None:
-                        self.gripper_target = gripper_target
-                    env.advance_physics(self.response.targets_for_step(self.servo.targets_for_step(self.arm_command)),
-                                        self.gripper_target)
-                    if not self.commanded:
-                        judge.restart(step)  # episodes are timed from the first command
-                    elif not self.holding and not self.calibrating and judge.due(step):
-                        verdict = env.judge_period()
-                        if verdict.ended:
-                            self._finish_episode(verdict, pacer.sim_time)
-                        self.tcp_path.append(tuple(env.tcp_position()))
-                if self.controller is not None:
-                    self._report_to_controller()
-                if publish.due(pacer.step):
-                    # Stamped when the state was true (a driver stamps its read), not when a
-                    # late loop got to publish it: replays and velocity estimates need the former.
-                    stamp = rospy.Time.from_sec(pacer.wall_time + ros_minus_monotonic)
-                    self._publish_state(stamp)
-                    if self.target_pub is not None and camera.due(pacer.sim_time):
-                        self.target_pub.publish(self._camera_message(stamp))
-                    if markers.due(pacer.sim_time):
-                        self.marker_pub.publish(scene_markers(env.scene(), env.object_pose(), self.tcp_path, stamp))
-            try:
-                rate.sleep()
-            except rospy.ROSInterruptException:
-                break
-
-    # ------------------------------------------------------------------ lockstep
-    def _spin_lockstep(self) -> None:
-        """One control period per command: publish the inputs stamped ``t``, then ``/clock`` =
-        ``t``; wait for the command (the policy node's timer fires on the clock); advance one
-        period as gym's ``step`` does; judge. Before an episode's first command the world waits
-        (time passes, physics does not), as a gym episode starts with its first action."""
-        params, env = self.params, self.env
-        period_ns = int(round(env.control_dt * 1e9))  # integer time: 0.02 s steps stay exact
-        marker_period_ns = int(round(1e9 / params.marker_rate))
-        now_ns, next_marker_ns = 1_000_000_000, 0  # start at 1 s: time 0 means "no clock yet" to many nodes
-        self.clock_pub.publish(Clock(clock=rospy.Time(0, now_ns)))
-        self._wait_for_policy()
-        now_ns = self._warm_up(now_ns, period_ns)
-        with self.lock:
-            self._start_episode()
-        wall_start, periods = time.monotonic(), 0
-        while not rospy.is_shutdown():
-            with self.lock:
-                if now_ns >= next_marker_ns:
-                    next_marker_ns = now_ns + marker_period_ns
-                    self.marker_pub.publish(scene_markers(env.scene(), env.object_pose(), self.tcp_path,
-                                                          rospy.Time(0, now_ns)))
-                self._open_period(now_ns)
-                arrived = self.command_arrived.wait_for(self._period_commanded,
-                                                        timeout=params.lockstep_command_timeout)
-                if self.commanded:
-                    if not arrived:
-                        self.late_periods += 1
-                    env.advance_period(self.arm_command, self.gripper_target)
-                    periods += 1
-                    verdict = env.judge_period()
-                    self.tcp_path.append(tuple(env.tcp_position()))
-                    if verdict.ended:
-                        self._finish_episode(verdict, (now_ns + period_ns) * 1e-9)
-                        if 0 < params.episodes <= self.episode:
-                            break
-                        self._start_episode()
-            now_ns += period_ns
-        wall = time.monotonic() - wall_start
-        if periods:
-            print(f"lockstep: {periods * env.control_dt:.1f} s simulated in {wall:.1f} s of wall time "
-                  f"({periods * env.control_dt / max(wall, 1e-9):.1f}x real time)", flush=True)
-
-    def _end_if_never_commanded(self, sim_time: float) -> None:
-        """Real time (lock held): an episode that a connected policy node never commands (it holds:
-        a target it refuses, a fault) ends after ``~first_command_timeout`` as failure
-        ``"no_command"``, so a run always finishes; its hold message says why."""
-        waiting = (self.params.first_command_timeout > 0.0 and not self.holding and not self.positioning
-                   and not self.commanded and self.command_sub.get_num_connections() > 0)
-        if not waiting:
-            self.uncommanded_since = None
-            return
-        now = time.monotonic()
-        if self.uncommanded_since is None:
-            self.uncommanded_since = now
-        elif now - self.uncommanded_since > self.params.first_command_timeout:
-            self.uncommanded_since = None
-            rospy.logwarn(f"sim_node: the policy node sent no command for {self.params.first_command_timeout:.0f} s "
-                          "of this episode (its hold message says why): ending it as failure no_command")
-            self._finish_episode(EpisodeVerdict(False, "no_command", True, False, 0, None), sim_time)
-
-    def _warm_up(self, now_ns: int, period_ns: int) -> int:
-        """Run periods without physics until one command arrives within its period: every
-        connection the loop uses then stands, so the first episode loses no message. The world
-        only waits (commands are ignored), so the reset that follows leaves it as gym's does.
-
-        :return: the time (ns) after the warm-up.
-        """
-        with self.lock:
-            self._start_episode()
-            self.holding = True  # commands are counted, not obeyed
-        arrived = False
-        while not arrived and not rospy.is_shutdown():
-            with self.lock:
-                self._open_period(now_ns)
-                arrived = self.command_arrived.wait_for(self._period_commanded,
-                                                        timeout=self.params.lockstep_command_timeout)
-            now_ns += period_ns
-        return now_ns
-
-    def _open_period(self, now_ns: int) -> None:
-        """Lockstep (lock held): the inputs stamped ``now_ns``, then ``/clock`` = ``now_ns``,
-        which starts the policy node's period; its commands count from here on."""
-        stamp = rospy.Time(0, now_ns)
-        self._publish_state(stamp)
-        if self.target_pub is not None:
-            self.target_pub.publish(self._camera_message(stamp))
-        self.new_command = self.new_gripper_command = False
-        self.clock_pub.publish(Clock(clock=stamp))
-
-    def _period_commanded(self) -> bool:
-        """Lockstep: this period's arm command (and gripper command) arrived, or shutdown."""
-        return (self.new_command and (self.new_gripper_command or not self.params.lockstep_gripper)) \
-            or rospy.is_shutdown()
-
-    def _wait_for_policy(self) -> None:
-        """Lockstep starts once the policy node can be reset and its commands reach us, so no
-        period is lost to connections still being made."""
-        deadline = time.monotonic() + 120.0
-        if self.reset_policy is not None:
-            try:
-                rospy.wait_for_service(self.params.policy_reset_service, timeout=120.0)
-            except rospy.ROSException:
-                rospy.logwarn(f"sim_node: {self.params.policy_reset_service} not offered after 120 s; starting anyway")
-        while self.command_sub.get_num_connections() == 0 and time.monotonic() < deadline \
-                and not rospy.is_shutdown():
-            time.sleep(0.05)
-
     # ------------------------------------------------------------------ episodes (lock held)
-    def _start_episode(self, settle: float = 0.0) -> None:
+    def start_episode(self, settle: float = 0.0) -> None:
         """Place a new object (seed + episode), hold the arm where the reset put it, and tell
         the policy node a new episode starts; with ``settle`` (s) > 0, tell it only after the
-        arm held the new scene that long (the real-time loop calls :meth:`_begin_episode`)."""
+        arm held the new scene that long (the real-time loop calls :meth:`begin_episode`)."""
         if self.params.episode_start == "go_to_start" and self.episode > 0:
             # A real arm is not teleported: only the object is placed, as a person would.
             self.env.reset(seed=self.params.seed + self.episode,
@@ -482,9 +313,9 @@ class SimulatorNode:
             self.holding, self.settling = True, True
             self.hold_until = time.monotonic() + settle
             return
-        self._begin_episode()
+        self.begin_episode()
 
-    def _begin_episode(self) -> None:
+    def begin_episode(self) -> None:
         """Obey commands from now on and tell the policy node a new episode starts."""
         self.holding, self.settling = False, False
         self.hold_until = 0.0
@@ -508,7 +339,7 @@ class SimulatorNode:
             rospy.logwarn_throttle(30.0, f"sim_node: could not reset the policy node through "
                                          f"{self.params.policy_reset_service}: {error}")
 
-    def _take_controller_command(self) -> None:
+    def take_controller_command(self) -> None:
         """gripper_interface xmlrpc (lock held): the width the emulated controller was given, for
         the fingers to take from when it arrived."""
         command = self.controller.newest_command()
@@ -518,7 +349,7 @@ class SimulatorNode:
         arrived, width = command
         self.gripper_arriving.push(arrived, float(np.clip(width, 0.0, self.spec.max_opening_width)))
 
-    def _report_to_controller(self) -> None:
+    def report_to_controller(self) -> None:
         """gripper_interface xmlrpc (lock held): what the fingers measure now, for the controller to
         read back; still moving while a command waits to be taken up."""
         states = self.env.joint_states()
@@ -589,7 +420,7 @@ class SimulatorNode:
             return False
         return not rospy.is_shutdown()
 
-    def _finish_episode(self, verdict: EpisodeVerdict, sim_time: float) -> None:
+    def finish_episode(self, verdict: EpisodeVerdict, sim_time: float) -> None:
         """Publish and log the outcome; in real time, hold the arm still for a moment."""
         self.episode += 1
         self.results.append(bool(verdict.success))
@@ -682,16 +513,16 @@ class SimulatorNode:
             elif not request.data and self.calibrating:
                 env.release_object()
                 self.calibrating = False
-                self._start_episode()
+                self.start_episode()
         return SetBoolResponse(success=True, message=f"calibration {'on' if request.data else 'off'}")
 
     def _on_reset(self, _request) -> TriggerResponse:
         with self.lock:
-            self._start_episode()
+            self.start_episode()
         return TriggerResponse(success=True, message=f"episode {self.episode} started")
 
     # ------------------------------------------------------------------ outputs
-    def _publish_state(self, stamp: rospy.Time) -> None:
+    def publish_state(self, stamp: rospy.Time) -> None:
         """The joint state as the driver reports it; for the simulated camera, all joints and
         the object's true pose, stamped alike."""
         states = self.env.joint_states()
@@ -705,7 +536,7 @@ class SimulatorNode:
         if self.object_pub is not None:
             self.object_pub.publish(object_marker(self.env.scene(), self.env.object_pose(), stamp))
 
-    def _camera_message(self, stamp: rospy.Time) -> PoseStamped:
+    def camera_message(self, stamp: rospy.Time) -> PoseStamped:
         """The object's pose as the camera sees it: in ``~camera_frame``, with optional noise."""
         pose = self.env.object_pose()
         object_in_base = matrix_from_quaternion(pose.position, pose.quaternion)

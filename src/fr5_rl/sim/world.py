@@ -116,7 +116,7 @@ class PyBulletWorld:
         a teleport PyBullet (3.2.7) lets it drop onto the table, which wakes it however it was
         asked to sleep, so the request that holds is made right after that step (:meth:`step`,
         :meth:`step_physics`). Awake on the table, the object wobbled by up to ~0.2 mm over an
-        episode and cost a quarter of every physics step (docs/benchmarks.md); asleep it costs
+        episode and cost a quarter of every physics step (docs/experiments.md); asleep it costs
         next to nothing, and the first touch of a finger wakes it as before.
         """
         orientation = p.getQuaternionFromEuler([0.0, 0.0, yaw])
