@@ -128,6 +128,7 @@ def test_compute_latencies_drawn_from_a_measured_record_set_when_each_command_ac
         env.close()
 
 
+@pytest.mark.slow  # hundreds of emulated periods: `make test`, not `make test-fast`
 def test_late_joint_states_repeat_in_some_periods_unless_the_node_waits_for_a_new_one():
     """Delivery jitter beside a timer at the driver's own rate hands some periods the state the
     period before used; the node's wait for a new state (policy_node ~fresh_state_wait) ends that."""

@@ -274,6 +274,65 @@ def test_an_object_lifted_before_the_fingers_show_stopped_is_in_the_hand():
     assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=far, width=size).state is TrackState.HIDDEN
 
 
+def test_fingers_still_squeezing_while_the_arm_lifts_hold_the_object():
+    """A fast gripper (the simulator's default driver) goes on closing by several mm a frame
+    while the arm already lifts. Waiting for the fingers to stop left the object "hidden" on the
+    table, and a policy that saw it left behind opened the hand (2026-11-28 vision runs). Risen
+    ``lift_evidence`` above the lowest point where they were around it, at a width that holds it: in the hand."""
+    frames = Frames()
+    seen = frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08)
+    centre, size = np.array(seen.position_table), seen.detection.size
+    grasp = tcp_at(*(centre + [0.0, 0.0, 0.01]))
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=size).state is TrackState.HIDDEN
+    squeezing = size - 0.005  # closed 5 mm more than the frame before: still closing
+    lifted_tcp = centre + [0.0, 0.0, 0.01 + 0.02]
+    lifted = frames(scene(GRIPPER_OVER_IT), tcp=tcp_at(*lifted_tcp), width=squeezing)
+    assert isinstance(lifted, TrackedObject) and lifted.state is TrackState.IN_HAND, lifted
+    np.testing.assert_allclose(lifted.position_table, lifted_tcp + [0.0, 0.0, -0.01], atol=1e-9)
+    # Squeezing without a lift is still closing: not yet in the hand.
+    frames = Frames()
+    frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08)
+    frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=size)
+    still = frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=tcp_at(*(centre + [0.0, 0.0, 0.015])), width=size - 0.005)
+    assert still.state is TrackState.HIDDEN
+    # Off (lift_evidence larger than any lift): the old rule, hidden until the fingers stop.
+    frames = Frames(lift_evidence=1.0)
+    frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08)
+    frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=size)
+    assert frames(scene(GRIPPER_OVER_IT), tcp=tcp_at(*lifted_tcp), width=squeezing).state is not TrackState.IN_HAND
+
+
+def test_a_lift_in_the_fingers_is_seen_between_frames_from_the_tcp_and_the_fingers_alone():
+    """The detector node checks the hand between frames (tf and the finger joints of now): a lift
+    with the fingers around the object is IN_HAND at once, not a camera latency later. A frame
+    captured before the fingers came around it (it arrives late) shows the object standing: that
+    does not make the tracker forget the grasp."""
+    frames = Frames()
+    seen = frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08)  # stamp 0.1
+    centre, size = np.array(seen.position_table), seen.detection.size
+    tracker = frames.tracker
+    grasp = tcp_at(*(centre + [0.0, 0.0, 0.01]))
+    assert tracker.hand_between_frames(0.12, grasp, 0.08) is None  # open: nothing between the fingers yet
+    assert tracker.hand_between_frames(0.14, grasp, size) is None  # around it, not lifted
+    # A late frame, captured at 0.13 (before the fingers closed), shows it standing.
+    late = tracker.update(detect(scene(OBJECT)), 0.13, scene(OBJECT), K, TABLE_FROM_OPTICAL, grasp, 0.08)
+    assert late.state is TrackState.SEEN
+    lifted_tcp = centre + [0.0, 0.0, 0.01 + 0.015]
+    held = tracker.hand_between_frames(0.16, tcp_at(*lifted_tcp), size - 0.004)
+    assert held is not None and held.state is TrackState.IN_HAND
+    np.testing.assert_allclose(held.position_tcp, [0.0, 0.0, -0.01], atol=1e-9)
+    np.testing.assert_allclose(held.position_table, lifted_tcp + [0.0, 0.0, -0.01], atol=1e-9)
+    # Unknown tcp or fingers, or nothing tracked: nothing changes.
+    assert Frames().tracker.hand_between_frames(0.1, grasp, size) is None
+    frames = Frames()
+    frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08)
+    assert frames.tracker.hand_between_frames(0.12, None, size) is None
+    assert frames.tracker.hand_between_frames(0.13, grasp, None) is None
+    # Fingers closed on nothing (narrower than min_grasp_fraction of it) and lifted: not held.
+    assert frames.tracker.hand_between_frames(0.14, grasp, 0.2 * size) is None
+    assert frames.tracker.hand_between_frames(0.15, tcp_at(*lifted_tcp), 0.2 * size) is None
+
+
 def test_a_remembered_grasp_pose_needs_this_frames_tcp_and_a_live_track():
     """The tcp pose with the fingers around the object is used only with this frame's tcp pose
     (tf may have none: the frame holds, no crash), and a reset or a sighting forgets it."""

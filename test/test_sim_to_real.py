@@ -259,6 +259,7 @@ def test_compare_run_refuses_a_bag_without_joint_states_in_one_line(tmp_path, ca
     assert not (tmp_path / "out" / "report.json").exists()
 
 
+@pytest.mark.integration  # the command line, drawing its pictures: `make lint`
 def test_compare_run_writes_the_report_and_pictures(tmp_path, hidden_run, capsys):
     from fr5_rl.cli import compare_run
 

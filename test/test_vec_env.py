@@ -91,6 +91,7 @@ def test_chunked_steps_exactly_as_a_dummy_vec_env_through_automatic_resets():
         reference.close()
 
 
+@pytest.mark.slow  # a curriculum run in worker processes: `make test`, not `make test-fast`
 def test_curriculum_starts_prepared_in_idle_time_change_nothing_the_trainer_sees():
     """Grasp with expert-prefixed starts, each environment's next one prepared in a spare while its
     process waits (the workers' and the trainer's chunk's idle time): the same observations,

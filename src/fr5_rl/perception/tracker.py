@@ -72,6 +72,10 @@ class TrackerSettings:
     :param closing_tolerance: m; fingers that closed by more than this since the last frame are
         still closing: the object is taken into the hand only once they stop on it (earlier, the
         tcp may still move relative to it).
+    :param lift_evidence: m; the tcp risen this far (table z) above where the fingers came around
+        the object, with them still at a width that holds it: it is in the hand even while they
+        go on closing (a fast gripper squeezes on for frames while the arm already lifts; waiting
+        for the fingers to stop left it "hidden" on the table and the policy let go).
     :param closing_axis: the direction (tcp frame) the fingers close along. Closing fingers push
         the object to their middle, so in the hand its offset along this axis is 0.
     :param gate_height: m; while an object is tracked, a detection whose top differs from its
@@ -91,6 +95,7 @@ class TrackerSettings:
     grasp_width_margin: float
     min_grasp_fraction: float
     closing_tolerance: float
+    lift_evidence: float
     closing_axis: List[float]
     gate_height: float
     gate_size: float
@@ -100,7 +105,7 @@ class TrackerSettings:
     def check(self, source: str) -> None:
         """Refuse values the tracker cannot work with (called by :func:`fr5_rl.config.typed`)."""
         if min(self.hidden_timeout, self.in_hand_timeout, self.front_tolerance, self.grasp_radius,
-               self.grasp_width_margin, self.min_grasp_fraction, self.nudge_radius) < 0 \
+               self.grasp_width_margin, self.min_grasp_fraction, self.nudge_radius, self.lift_evidence) < 0 \
                 or self.nudge_step <= 0 or not 0 <= self.max_table_fraction <= 1:
             raise ConfigError(f"{source}: the tracking parameters must be >= 0 and max_table_fraction in [0, 1] "
                               "(hidden_timeout 0 switches tracking off), nudge_step > 0")
@@ -222,7 +227,8 @@ class ObjectTracker:
       tcp within ``grasp_radius`` of it, in this frame or in an earlier one since which they have
       kept that width (a policy lifts at once: by the frame that shows the fingers stopped, the
       spot where it stood may be bare), checked before the look at that spot: it is in the hand
-      (IN_HAND). Its offset in the tcp
+      (IN_HAND). Fingers still closing count too once the tcp has risen ``lift_evidence`` above
+      where they came around it (a fast gripper squeezes on while the arm lifts). Its offset in the tcp
       frame is kept and published *in the tcp frame*, so whoever uses it places it with the
       newest tcp pose: no camera latency on a held object. It stays in the hand until the
       fingers open or close on nothing, where it would be the camera sees the bare table, or
@@ -252,6 +258,8 @@ class ObjectTracker:
         self.table = table
         self._last_width: Optional[float] = None  # the fingers' opening (m) in the last frame; None: unknown
         self._grasp_tcp: Optional[np.ndarray] = None  # see _grasp_pose
+        self._grasp_low: Optional[np.ndarray] = None  # the lowest tcp pose (table z) with the fingers around it
+        self._grasp_low_stamp = 0.0  # when it was taken (s)
         self._track = Track.lost()
 
     @property
@@ -263,6 +271,7 @@ class ObjectTracker:
         """Forget the object (a new one will be detected before anything is published)."""
         self._track = Track.lost()
         self._grasp_tcp = None
+        self._grasp_low = None
 
     def update(self, result: Union[Detection, Refusal], stamp: float, depth: Optional[np.ndarray] = None,
                intrinsics: Optional[Intrinsics] = None, table_from_optical: Optional[np.ndarray] = None,
@@ -302,7 +311,11 @@ class ObjectTracker:
             track.position = np.array(result.position_table, dtype=np.float64)
             track.top_height, track.size, track.last_seen = result.top_height, result.size, stamp
             track.rest = (float(track.position[2]), result.top_height)  # seen: standing on the table
-            self._grasp_tcp = None  # standing, so not (yet) between the fingers
+            if self._grasp_low is None or stamp >= self._grasp_low_stamp:
+                # Standing, so not (yet) between the fingers; a frame captured before they came
+                # around it (the camera's latency) says nothing about that.
+                self._grasp_tcp = None
+                self._grasp_low = None
             return TrackedObject(tuple(track.position.tolist()), TrackState.SEEN, stamp, result)
         if not tracking:
             return result
@@ -319,8 +332,12 @@ class ObjectTracker:
             return result  # no look at where it stands: the track stays as it is
         # Closed on it before the look at where it stood: a fast lift carries it off that spot
         # within a frame, and the bare table there then means "in the hand", not "gone".
-        grasped_from = self._grasp_pose(tcp, gripper_width)
-        if not closing and tcp is not None and grasped_from is not None:
+        grasped_from = self._grasp_pose(tcp, gripper_width, stamp)
+        lifted = (tcp is not None and grasped_from is not None and self._grasp_low is not None
+                  and tcp[2, 3] - self._grasp_low[2, 3] >= s.lift_evidence)
+        if lifted:
+            grasped_from = self._grasp_low  # it rose with the fingers from there
+        if (not closing or lifted) and tcp is not None and grasped_from is not None:
             self._take_into_hand(tcp, grasped_from)
             return self._held(TrackState.IN_HAND)
         gone = self._gone(look)
@@ -330,6 +347,29 @@ class ObjectTracker:
         if result.reason is RefusalReason.NO_OBJECT and self._track.in_front == 0.0:
             return result  # nothing in front of it and no object: not hidden, it was just not found
         return self._held(TrackState.HIDDEN)
+
+    def hand_between_frames(self, stamp: float, table_from_tcp: Optional[np.ndarray],
+                            gripper_width: Optional[float]) -> Optional[TrackedObject]:
+        """Between camera frames, from the tcp and the fingers alone: whether a tracked object
+        (SEEN or HIDDEN) has just been lifted in the hand (the fingers around it, at a width that
+        holds it, and the tcp ``lift_evidence`` above the lowest point where they were). A frame
+        would say so a camera latency later (60-150 ms), by when a policy that sees the object left
+        on the table has opened the hand; the environment's model of the tracker says so at once.
+
+        :param stamp: now (s, the frames' clock).
+        :param table_from_tcp: the tcp pose now (4x4, table frame); None: unknown (nothing changes).
+        :param gripper_width: the fingers' opening now (m); None: unknown.
+        :return: the object, now IN_HAND, or None when nothing changed.
+        """
+        if self._track.state not in (TrackState.SEEN, TrackState.HIDDEN) or table_from_tcp is None \
+                or gripper_width is None:
+            return None
+        tcp = np.asarray(table_from_tcp, dtype=np.float64)
+        if self._grasp_pose(tcp, gripper_width, stamp) is None or self._grasp_low is None \
+                or tcp[2, 3] - self._grasp_low[2, 3] < self.settings.lift_evidence:
+            return None
+        self._take_into_hand(tcp, self._grasp_low)
+        return self._held(TrackState.IN_HAND)
 
     def _follow_hand(self, result: Union[Detection, Refusal], stamp: float, look, tcp: Optional[np.ndarray],
                      width: Optional[float]) -> Union[TrackedObject, Refusal]:
@@ -356,7 +396,7 @@ class ObjectTracker:
             return Refusal(RefusalReason.NO_OBJECT, f"not in the hand any more: {gone}")
         return self._held(TrackState.IN_HAND)
 
-    def _grasp_pose(self, tcp: Optional[np.ndarray], width: Optional[float]) -> Optional[np.ndarray]:
+    def _grasp_pose(self, tcp: Optional[np.ndarray], width: Optional[float], stamp: float) -> Optional[np.ndarray]:
         """The tcp pose (4x4, table frame) at which the fingers came around the tracked object,
         while they stay at a width that holds it; None otherwise.
 
@@ -367,8 +407,11 @@ class ObjectTracker:
         seen standing, or the track is reset; a frame without the tcp pose keeps it."""
         if self._closed_on_it(tcp, width):
             self._grasp_tcp = np.array(tcp, dtype=np.float64)
+            if self._grasp_low is None or tcp[2, 3] < self._grasp_low[2, 3]:
+                self._grasp_low, self._grasp_low_stamp = self._grasp_tcp, stamp
         elif width is None or not self._fits(width):
             self._grasp_tcp = None
+            self._grasp_low = None
         return self._grasp_tcp
 
     def _take_into_hand(self, tcp: np.ndarray, grasped_from: np.ndarray) -> None:
@@ -376,6 +419,7 @@ class ObjectTracker:
         the tcp stood at ``grasped_from``; place it with the tcp at ``tcp`` now."""
         track = self._track
         self._grasp_tcp = None
+        self._grasp_low = None
         in_tcp = (np.linalg.inv(grasped_from) @ np.append(track.position, 1.0))[:3]
         axis = np.asarray(self.settings.closing_axis, dtype=np.float64)
         axis /= np.linalg.norm(axis)

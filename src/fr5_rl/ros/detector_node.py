@@ -73,6 +73,8 @@ class DetectorNodeParams:
     :param tracker: the tracker's settings, handed to it whole.
     :param joint_states_topics: sensor_msgs/JointState topics merged by joint name for the finger
         joints (the arm's driver and a gripper driver may publish apart).
+    :param hand_check_rate: Hz at which, between frames, the tcp and the fingers alone are checked
+        for a lift of the tracked object in the hand (:meth:`ObjectTracker.hand_between_frames`); 0: off.
     """
 
     color_topic: str
@@ -89,8 +91,11 @@ class DetectorNodeParams:
     tcp_frame: str
     joint_states_topics: List[str]
     track_state_topic: str
+    hand_check_rate: float
 
     def check(self, source: str) -> None:
+        if self.hand_check_rate < 0:
+            raise ConfigError(f"{source}: 'hand_check_rate' must be >= 0 Hz (0: off), got {self.hand_check_rate}")
         if self.sync_slop <= 0 or self.max_image_age <= 0:
             raise ConfigError(f"{source}: sync_slop and max_image_age must be > 0")
         if not self.joint_states_topics or len(set(self.joint_states_topics)) != len(self.joint_states_topics):
@@ -156,6 +161,7 @@ class DetectorNode:
         table = TableRegion.from_env(load_env_config())  # the table and the placement region: env.yaml's
         self.detector = ObjectDetector(params.detector, table)
         self.tracker = ObjectTracker(params.tracker, params.detector, table)
+        self.tracker_lock = threading.Lock()  # frames and the between-frames hand check
         self.last_refusal: Optional[RefusalReason] = None
         self.last_track: Optional[TrackState] = None
         # Recent openings by stamp, to read the opening at an image's stamp.
@@ -184,6 +190,8 @@ class DetectorNode:
         for subscriber, topic in zip(subscribers, self.last_arrival):
             subscriber.registerCallback(lambda _message, topic=topic: self.last_arrival.__setitem__(topic, time.monotonic()))
         self.watchdog = rospy.Timer(rospy.Duration(1.0), self.check_inputs)
+        if params.hand_check_rate > 0:
+            self.hand_timer = rospy.Timer(rospy.Duration(1.0 / params.hand_check_rate), self.check_hand)
         rospy.loginfo(f"detector_node: {params.color_topic} + {params.depth_topic} + {params.camera_info_topic} "
                       f"-> {params.target_topic}")
 
@@ -202,6 +210,20 @@ class DetectorNode:
             t, r = transform.transform.translation, transform.transform.rotation
             return matrix_from_quaternion((t.x, t.y, t.z), (r.x, r.y, r.z, r.w))
         return None
+
+    def check_hand(self, _event) -> None:
+        """Between frames: a lift of the tracked object in the fingers, from tf and the finger
+        joints of now, published at once (in the tcp frame, stamped now)."""
+        now = rospy.Time.now()
+        tcp, width = self.tcp_at(rospy.Time(0)), self.widths.at(now.to_sec())
+        with self.tracker_lock:
+            tracked = self.tracker.hand_between_frames(now.to_sec(), tcp, width)
+        if tracked is not None:
+            try:
+                self.publish_target(tracked, now, self.params.tcp_frame)
+            except rospy.ROSException:
+                if not rospy.is_shutdown():
+                    raise
 
     def check_inputs(self, _event) -> None:
         """Warn when frames stopped although images come: an input is missing or out of sync."""
@@ -249,7 +271,7 @@ class DetectorNode:
             result = self.track(result, depth_m, intrinsics, stamp)
         tracked = time.perf_counter()
         if isinstance(result, TrackedObject):
-            self.publish_target(result, color)
+            self.publish_target(result, color.header.stamp, color.header.frame_id)
         else:
             self.report(result)
         self.timing_pub.publish(Float64MultiArray(data=[decoded - started, detected - decoded, tracked - detected,
@@ -277,7 +299,9 @@ class DetectorNode:
             rospy.logwarn(f"detector_node: no {missing}: an object held in the gripper cannot be followed, only a "
                           "hidden one held at its last position; publish it to follow grasped objects")
             self.warned_no_hand = True
-        return self.tracker.update(result, stamp.to_sec(), depth_m, intrinsics, self.table_from_optical, tcp, width)
+        with self.tracker_lock:
+            return self.tracker.update(result, stamp.to_sec(), depth_m, intrinsics, self.table_from_optical, tcp,
+                                       width)
 
     def detect(self, rgb: np.ndarray, depth_m: np.ndarray, intrinsics, color: Image) -> Union[Detection, Refusal]:
         try:
@@ -288,19 +312,21 @@ class DetectorNode:
         self.table_from_optical = matrix_from_quaternion((t.x, t.y, t.z), (r.x, r.y, r.z, r.w))
         return self.detector.detect(depth_m, intrinsics, self.table_from_optical, rgb)
 
-    def publish_target(self, tracked: TrackedObject, color: Image) -> None:
+    def publish_target(self, tracked: TrackedObject, stamp: rospy.Time, optical_frame: str) -> None:
+        """:param stamp: the frame's capture time (or now, between frames).
+        :param optical_frame: the frame's optical frame (a held object is published in the tcp frame)."""
         if self.last_refusal is not None:
             rospy.loginfo(f"detector_node: object found again (was: {self.last_refusal.value})")
             self.last_refusal = None
         if tracked.state != self.last_track:
             # Said at every change: a published position that was not seen this frame is news.
-            age = color.header.stamp.to_sec() - tracked.last_seen
+            age = stamp.to_sec() - tracked.last_seen
             rospy.loginfo(f"detector_node: object {tracked.state.value}"
                           + ("" if tracked.state is TrackState.SEEN else f" (last seen {age:.2f} s ago)"))
             self.last_track = tracked.state
         self.state_pub.publish(String(data=tracked.state.value))
         message = PoseStamped()
-        message.header.stamp = color.header.stamp
+        message.header.stamp = stamp
         position, orientation = message.pose.position, message.pose.orientation
         if tracked.position_tcp is not None:
             # Held: in the tcp frame, so the user's tf places it at the newest tcp pose rather
@@ -309,7 +335,7 @@ class DetectorNode:
             position.x, position.y, position.z = tracked.position_tcp
             orientation.w = 1.0
         else:
-            message.header.frame_id = color.header.frame_id
+            message.header.frame_id = optical_frame
             optical_from_table = np.linalg.inv(self.table_from_optical)
             position.x, position.y, position.z = (optical_from_table @ np.append(tracked.position_table, 1.0))[:3]
             # An upright object: the table's orientation, seen from the camera.
