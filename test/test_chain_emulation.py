@@ -1,31 +1,28 @@
-"""tools/bench/timing.py's chain emulation is wired as the rehearsal is: the policy observes the
-fingers only through the gripper bridge's read-back of the emulated controller, the velocities
+"""The chain emulation (fr5_rl.chain_emulation, which tools/bench/timing.py runs) is wired as the
+rehearsal is: the policy observes the fingers only through the gripper bridge's read-back of the emulated controller, the velocities
 it observes are estimated (the driver sends 0.0), and an episode after the first begins with
 the motion guard's start move from where the previous one ended."""
 import argparse
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools" / "bench"))
+from fr5_rl import chain_emulation
+from fr5_rl.config import load_robot_spec, load_yaml, package_root, typed
+from fr5_rl.deploy.deployment import DeploymentStep
+from fr5_rl.motion_guard import MotionGuardSettings
+from fr5_rl.deploy.policy import load_policy
+from fr5_rl.env_config import load_env_config
+from fr5_rl.envs import FR5Env
+from fr5_rl.observation import DelayedTarget
 
-import timing  # noqa: E402
-from fr5_rl.config import load_robot_spec, load_yaml, package_root, typed  # noqa: E402
-from fr5_rl.deploy.deployment import DeploymentStep  # noqa: E402
-from fr5_rl.motion_guard import MotionGuardSettings  # noqa: E402
-from fr5_rl.deploy.policy import load_policy  # noqa: E402
-from fr5_rl.env_config import load_env_config  # noqa: E402
-from fr5_rl.envs import FR5Env  # noqa: E402
 
-
-def emulation(profile: str, hidden_radius: float = timing.CAMERA_HIDDEN_RADIUS_M, state_jitter_s: float = 0.0,
+def emulation(profile: str, hidden_radius: float = chain_emulation.CAMERA_HIDDEN_RADIUS_M, state_jitter_s: float = 0.0,
               fresh_state_wait_s: float = 0.0, **overrides):
-    params = timing.simulator_profile(profile)
+    params = chain_emulation.simulator_profile(profile)
     args = argparse.Namespace(**{"finger_source": None, "velocity_source": None, "episode_start": None,
                                  "target": "simulator", **overrides})
-    chain = timing.Chain.of(params, args)
+    chain = chain_emulation.Chain.of(params, args)
     policy = load_policy(package_root() / "models" / "reach", "onnx")
     env = FR5Env("reach", config={"reach": {"simulation": {"physics_dt": float(params["physics_dt"]),
                                                            "solver_iterations": int(params["solver_iterations"])}}})
@@ -34,7 +31,7 @@ def emulation(profile: str, hidden_radius: float = timing.CAMERA_HIDDEN_RADIUS_M
     trained = load_env_config(policy.meta.get("env_overrides", {}))
     step = DeploymentStep(policy, load_robot_spec(), trained, float(node["joint_state_timeout"]),
                           float(node["target_timeout"]), guard=guard if chain.episode_start == "go_to_start" else None)
-    return timing.ChainEmulation(env, step, chain, params, 0.002, np.random.default_rng(0),
+    return chain_emulation.ChainEmulation(env, step, chain, params, 0.002, np.random.default_rng(0),
                                  trained.observation.joint_velocity_source, hidden_radius,
                                  state_jitter_s=state_jitter_s, fresh_state_wait_s=fresh_state_wait_s), env
 
@@ -42,7 +39,7 @@ def emulation(profile: str, hidden_radius: float = timing.CAMERA_HIDDEN_RADIUS_M
 def test_the_fairino_profile_is_the_rehearsals_chain():
     run, env = emulation("fairino")
     try:
-        assert run.chain == timing.Chain("bridge", "positions", "go_to_start", publish_velocities=False)
+        assert run.chain == chain_emulation.Chain("bridge", "positions", "go_to_start", publish_velocities=False)
         # Reset, activation and its settle ran before the first episode, as the policy node holds
         # on the bridge's fault until then: the first episode starts with a gripper that can act.
         status = run.bridge.status()
@@ -69,7 +66,7 @@ def test_the_fairino_profile_is_the_rehearsals_chain():
 def test_the_default_profile_takes_fingers_and_velocities_from_the_driver():
     run, env = emulation("default")
     try:
-        assert run.chain == timing.Chain("driver", "driver", "reset", publish_velocities=True)
+        assert run.chain == chain_emulation.Chain("driver", "driver", "reset", publish_velocities=True)
         assert run.bridge is None
         record = run.run_episode(930_000)
         assert record["start_move_s"] == 0.0 and record["steps"] > 0
@@ -86,7 +83,7 @@ def test_the_camera_target_arrives_one_latency_late_stamped_with_its_capture_and
         assert run.chain.target == "camera"
         env.reset(seed=930_000)
         period = 1.0 / 15.0
-        camera = timing.DelayedTarget(latency=0.1, frame_period=period, phase=0.03)
+        camera = DelayedTarget(latency=0.1, frame_period=period, phase=0.03)
         start = env.object_position().copy()
         readings = []
         for k in range(20):
@@ -103,7 +100,7 @@ def test_the_camera_target_arrives_one_latency_late_stamped_with_its_capture_and
         # The tcp within the radius (every distance is, at 10 m): the push stays unseen.
         run.hidden_radius = 10.0
         env.reset(seed=930_000)
-        camera = timing.DelayedTarget(latency=0.1, frame_period=0.02, phase=0.0)
+        camera = DelayedTarget(latency=0.1, frame_period=0.02, phase=0.0)
         readings = []
         for k in range(15):
             if k == 5:

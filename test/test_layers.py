@@ -56,6 +56,8 @@ ALLOWED = {
     # Record, replay, compare and fit (compare_run.py, fit_driver.py): tools, never deployed.
     "sim_to_real": {"sim_to_real", "shared", "envs", "sim", "tasks"},
     "training": {"training", "deploy", "shared", "envs", "expert", "sim", "tasks"},
+    # The rehearsal's chain in one process: the simulator, the drivers and the deployed node's code.
+    "chain_emulation": {"shared", "envs", "sim", "tasks", "deploy", "drivers"},
     "deploy": {"deploy", "shared"},
     "perception": {"perception", "shared"},
     "drivers": {"drivers", "shared"},
