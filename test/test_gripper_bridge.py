@@ -28,7 +28,8 @@ from fr5_rl.config import ConfigError, load_robot_spec, load_typed, typed
 from fr5_rl.drivers.fr5_xmlrpc import (
     Call, ControllerClient, ControllerRefused,
 )
-from fr5_rl.drivers.gripper_bridge import GripperBridge, GripperBridgeParams
+from fr5_rl.drivers.gripper_bridge import GripperBridge
+from fr5_rl.drivers.gripper_bridge_params import GripperBridgeParams
 from fr5_rl.drivers.gripper_decisions import Backoff, ThrottledReport, binary_state
 from fr5_rl.gripper import needs_move, width_to_percent
 

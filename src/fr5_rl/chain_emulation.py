@@ -16,7 +16,8 @@ import numpy as np
 from .config import load_yaml, package_root, typed, whole_multiple
 from .deploy.deployment import Command, DeploymentStep, StepInputs
 from .deploy.joint_state import FreshStateWait, JointStateReader, Reading, velocities_from_positions
-from .drivers.gripper_bridge import GripperBridge, GripperBridgeParams, GripperReading
+from .drivers.gripper_bridge import GripperBridge, GripperReading
+from .drivers.gripper_bridge_params import GripperBridgeParams
 from .env_config import load_env_config
 from .envs import FR5Env
 from .motion_guard import load_guard_settings

@@ -29,7 +29,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, String
 
 from ..config import ConfigError, load_robot_spec
-from ..drivers.gripper_bridge import BridgeStatus, GripperBridge, GripperBridgeParams, GripperReading
+from ..drivers.gripper_bridge import BridgeStatus, GripperBridge, GripperReading
+from ..drivers.gripper_bridge_params import GripperBridgeParams
 from .params import exit_if_help_asked, node_parameters
 from .lifetime import init_node
 

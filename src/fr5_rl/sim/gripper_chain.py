@@ -16,7 +16,8 @@ from typing import Any, Tuple
 
 from ..config import load_yaml, package_root, typed
 from ..drivers.fr5_xmlrpc import Call, ControllerRefused, error_code_of
-from ..drivers.gripper_bridge import GripperBridge, GripperBridgeParams, GripperReading
+from ..drivers.gripper_bridge import GripperBridge, GripperReading
+from ..drivers.gripper_bridge_params import GripperBridgeParams
 from ..gripper import BridgeTiming
 from .controller_emulator import ControllerEmulator, ControllerEmulatorSettings
 
