@@ -602,3 +602,14 @@ def test_detector_takes_a_list_of_joint_state_topics():
     for bad in ([], ["/a", "/a"]):
         with pytest.raises(ConfigError, match="joint_states_topics"):
             typed(DetectorNodeParams, {**values, "joint_states_topics": bad}, "x")
+
+
+def test_the_environments_model_of_in_the_hand_uses_the_trackers_thresholds():
+    """One rule, two places: the environment's ``held_as_the_camera_sees`` (what training sees)
+    and the detector's tracker (what the node publishes) must agree on when fingers hold it."""
+    from fr5_rl.env_config import load_env_config
+
+    randomisation = load_env_config().randomisation
+    tracker = TrackerSettings.from_yaml()
+    assert randomisation.target_in_hand_radius == tracker.grasp_radius
+    assert randomisation.target_in_hand_width_margin == tracker.grasp_width_margin

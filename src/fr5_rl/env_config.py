@@ -210,6 +210,11 @@ class RandomisationConfig:
     target_rate_hz: float
     gripper_latency_steps: Optional[List[int]]  # inclusive range drawn apart from the arm's, None: the arm's
     target_hidden_radius: float  # m, tcp to object centre within which a frame shows it hidden; 0: never
+    # The detector tracker's "in the hand" (config/detector.yaml tracker: grasp_radius,
+    # grasp_width_margin), and how far the object must have risen off its rest (m).
+    target_in_hand_radius: float
+    target_in_hand_width_margin: float
+    target_in_hand_lift: float
     response_time_constant_s: List[float]  # s per joint, [] none
     placement_focus_share: float  # share of episodes whose object is placed in the focus region instead
     placement_focus_low: List[float]  # (x, y) m, base_link
@@ -230,6 +235,9 @@ class RandomisationConfig:
             raise ConfigError(f"randomisation.target_latency_s: {self.target_latency_s} must satisfy 0 <= low <= high (s)")
         if self.target_rate_hz <= 0.0:
             raise ConfigError(f"randomisation.target_rate_hz: {self.target_rate_hz} must be positive (Hz)")
+        if min(self.target_in_hand_radius, self.target_in_hand_width_margin, self.target_in_hand_lift) < 0.0:
+            raise ConfigError("randomisation.target_in_hand_radius, target_in_hand_width_margin and "
+                              "target_in_hand_lift must be >= 0 m")
         if not 0.0 <= self.target_hidden_radius < float("inf"):
             raise ConfigError(f"randomisation.target_hidden_radius: {self.target_hidden_radius} must be a finite "
                               "distance >= 0 (m; 0: the camera always sees the object)")

@@ -647,12 +647,15 @@ class FR5Env(gym.Env):
     def held_as_the_camera_sees(self, state: TaskState) -> bool:
         """The object is in the hand as the detector's tracker decides it (then it is published
         in the tcp frame, without the camera's delay): the fingers closed to about the object's
-        width, the tcp within 4 cm of its centre, the object lifted off its resting height.
+        width, the tcp near its centre, the object lifted off its resting height
+        (``randomisation.target_in_hand_*``, the tracker's thresholds).
 
         :param state: :meth:`task_state` of this moment.
         """
-        return (state.gripper_width <= 2.0 * self._object_dims[0] + 0.01
-                and state.tcp_to_object_distance <= 0.04 and state.object_position[2] > self._object_rest_z + 0.005)
+        rnd = self.cfg.randomisation
+        return (state.gripper_width <= 2.0 * self._object_dims[0] + rnd.target_in_hand_width_margin
+                and state.tcp_to_object_distance <= rnd.target_in_hand_radius
+                and state.object_position[2] > self._object_rest_z + rnd.target_in_hand_lift)
 
     def _observe(self, measured_early: Optional[tuple] = None, sample_time: float = 0.0,
                  now: float = 0.0) -> Tuple[TaskState, np.ndarray]:
