@@ -115,6 +115,7 @@ class SimNodeParams:
     policy_reset_service: str
     policy_enable_service: str
     teleport_settle_time: float
+    policy_call_timeout: float
     episode_start: str
     first_command_timeout: float
     outcome_log: str
@@ -139,9 +140,9 @@ class SimNodeParams:
         check_positive(source, publish_rate=self.publish_rate, physics_dt=self.physics_dt, camera_rate=self.camera_rate,
                   marker_rate=self.marker_rate, solver_iterations=self.solver_iterations)
         if min(self.episodes, self.camera_noise_std, self.pause_between_episodes, self.reset_settle_time,
-               self.first_command_timeout, self.teleport_settle_time) < 0:
+               self.first_command_timeout, self.teleport_settle_time) < 0 or self.policy_call_timeout <= 0:
             raise ConfigError(f"{source}: episodes, camera_noise_std, pause_between_episodes, reset_settle_time, "
-                              "first_command_timeout and teleport_settle_time must be >= 0")
+                              "first_command_timeout and teleport_settle_time must be >= 0, policy_call_timeout > 0")
 
 
 class SimulatorNode:
@@ -233,6 +234,7 @@ class SimulatorNode:
         self.episode_starts = 0
         # Real time: the policy node was paused (it was enabled) for a teleport, to resume before its ~reset.
         self.resume_after_teleport = False
+        self.pause_answers: List[str] = []  # the policy node's answer to the pause before a teleport
 
         # ---- ROS interfaces
         self.joint_pub = rospy.Publisher(params.joint_states_topic, JointState, queue_size=10)
@@ -365,11 +367,23 @@ class SimulatorNode:
         self.resume_after_teleport = False
         if not self.params.policy_enable_service:
             return
-        try:
-            answer = rospy.ServiceProxy(self.params.policy_enable_service, SetBool)(False)
-        except (rospy.ServiceException, rospy.ROSException):
-            return  # no policy node (yet), or one without ~enable
-        self.resume_after_teleport = "(was enabled)" in answer.message
+        answers: List[str] = []
+
+        def pause() -> None:
+            try:
+                answers.append(rospy.ServiceProxy(self.params.policy_enable_service, SetBool)(False).message)
+            except (rospy.ServiceException, rospy.ROSException):
+                pass  # no policy node (yet), or one without ~enable
+
+        # The loop holds the lock: a policy node that does not answer must not stall the arm's
+        # states. Unanswered in time, the teleport goes on (the node may then hold on the jump
+        # until the ~enable that follows).
+        caller = threading.Thread(target=pause, daemon=True)
+        caller.start()
+        caller.join(self.params.policy_call_timeout)
+        # Read when resuming, so that a late answer still counts.
+        self.pause_answers = answers
+        self.resume_after_teleport = True
 
     def _resume_policy_after_teleport(self) -> None:
         """Real time (own thread): once the teleported state has reached the policy node (states
@@ -377,9 +391,12 @@ class SimulatorNode:
         ~enable accepts the new state as the arm's."""
         with self.lock:
             resume, self.resume_after_teleport = self.resume_after_teleport, False
+            answers = self.pause_answers
         if not resume:
             return
         time.sleep(self.params.teleport_settle_time)
+        if not answers or "(was enabled)" not in answers[0]:
+            return  # paused by someone else (or it never answered): not ours to resume
         try:
             rospy.ServiceProxy(self.params.policy_enable_service, SetBool)(True)
         except (rospy.ServiceException, rospy.ROSException) as error:
