@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from fr5_rl import chain_emulation
-from fr5_rl.config import load_robot_spec, load_yaml, package_root, typed
+from fr5_rl.config import load_robot_spec, package_root
 from fr5_rl.deploy.deployment import DeploymentStep
-from fr5_rl.motion_guard import MotionGuardSettings
+from fr5_rl.deploy.policy_node_params import load_policy_node_params
 from fr5_rl.deploy.policy import load_policy
 from fr5_rl.env_config import load_env_config
-from fr5_rl.envs import FR5Env
+from fr5_rl.episode import Episode
 from fr5_rl.observation import DelayedTarget
 
 
@@ -24,13 +24,12 @@ def emulation(profile: str, hidden_radius: float = chain_emulation.CAMERA_HIDDEN
                                  "target": "simulator", **overrides})
     chain = chain_emulation.Chain.of(params, args)
     policy = load_policy(package_root() / "models" / "reach", "onnx")
-    env = FR5Env("reach", config={"reach": {"simulation": {"physics_dt": float(params["physics_dt"]),
-                                                           "solver_iterations": int(params["solver_iterations"])}}})
-    node = load_yaml(package_root() / "config" / "policy_node.yaml")
-    guard = typed(MotionGuardSettings, {**node["guard"], "go_to_start": True}, "guard")
+    env = Episode.build("reach", overrides={"reach": {"simulation": {"physics_dt": params.physics_dt,
+                                                                     "solver_iterations": params.solver_iterations}}})
+    node = load_policy_node_params({"guard": {"go_to_start": True}})
     trained = load_env_config(policy.meta.get("env_overrides", {}))
-    step = DeploymentStep(policy, load_robot_spec(), trained, float(node["joint_state_timeout"]),
-                          float(node["target_timeout"]), guard=guard if chain.episode_start == "go_to_start" else None)
+    step = DeploymentStep(policy, load_robot_spec(), trained, node.joint_state_timeout,
+                          node.target_timeout, guard=node.guard if chain.episode_start == "go_to_start" else None)
     return chain_emulation.ChainEmulation(env, step, chain, params, 0.002, np.random.default_rng(0),
                                  trained.observation.joint_velocity_source, hidden_radius,
                                  state_jitter_s=state_jitter_s, fresh_state_wait_s=fresh_state_wait_s), env
@@ -81,14 +80,14 @@ def test_the_camera_target_arrives_one_latency_late_stamped_with_its_capture_and
     run, env = emulation("fairino", target="camera", hidden_radius=0.0)
     try:
         assert run.chain.target == "camera"
-        env.reset(seed=930_000)
+        env.start(930_000)
         period = 1.0 / 15.0
         camera = DelayedTarget(latency=0.1, frame_period=period, phase=0.03)
-        start = env.object_position().copy()
+        start = env.object_pose().position
         readings = []
         for k in range(20):
             if k == 5:  # pushed 5 cm at 0.1 s
-                env.world.place_object((start[0] + 0.05, start[1], start[2]), yaw=0.0)
+                env.plant.place_object((start[0] + 0.05, start[1]), yaw=0.0)
             run.clock.now += 0.02
             readings.append(run._target(camera, 0.02 * k))
         for k, reading in enumerate(readings):
@@ -99,12 +98,12 @@ def test_the_camera_target_arrives_one_latency_late_stamped_with_its_capture_and
         assert seen_x[-1] == pytest.approx(0.05, abs=1e-3)
         # The tcp within the radius (every distance is, at 10 m): the push stays unseen.
         run.hidden_radius = 10.0
-        env.reset(seed=930_000)
+        env.start(930_000)
         camera = DelayedTarget(latency=0.1, frame_period=0.02, phase=0.0)
         readings = []
         for k in range(15):
             if k == 5:
-                env.world.place_object((start[0] + 0.05, start[1], start[2]), yaw=0.0)
+                env.plant.place_object((start[0] + 0.05, start[1]), yaw=0.0)
             run.clock.now += 0.02
             readings.append(run._target(camera, 0.02 * k))
         assert max(abs(r.value[0] - start[0]) for r in readings) < 1e-3

@@ -6,8 +6,8 @@ import pytest
 import yaml
 
 from fr5_rl.config import ConfigError, load_typed, load_yaml, typed
-from fr5_rl.ros.policy_node import PolicyNodeParams
-from fr5_rl.ros.sim_node import SimNodeParams
+from fr5_rl.deploy.policy_node_params import PolicyNodeParams
+from fr5_rl.sim.node_params import SimNodeParams
 from fr5_rl.training.algorithms import check_hyperparameters, load_hyperparameters
 from fr5_rl.training.hyperparameters import DaggerConfig, Hyperparameters
 from fr5_rl.transforms import StaticTransforms, load_static_transforms
@@ -137,3 +137,25 @@ def test_whole_multiple():
     assert whole_multiple(0.02, 0.004) == 5 and whole_multiple(0.008, 0.004) == 2
     assert whole_multiple(0.02, 0.003) is None and whole_multiple(0.002, 0.004) is None
     assert whole_multiple(0.02, 0.0) is None
+
+
+def test_the_environment_models_the_deployed_chains_own_settings_and_records_them(tmp_path):
+    """EnvConfig.deployed is read from the nodes' files (one source), lands in meta.json, and is
+    what the environment's chain runs; an override reaches the chain."""
+    from fr5_rl.deploy.bundle import build_meta
+    from fr5_rl.env_config import load_env_config
+    from fr5_rl.envs import FR5Env
+    from fr5_rl.gripper import load_bridge_timing
+    from fr5_rl.motion_guard import load_guard_settings
+
+    cfg = load_env_config()
+    assert cfg.deployed.guard == load_guard_settings() and cfg.deployed.bridge == load_bridge_timing()
+    meta = build_meta("reach", "ppo", {}, cfg, 1, 7, 0.02, 0)
+    assert meta["env_config"]["deployed"]["guard"]["ramp_time"] == load_guard_settings().ramp_time
+    assert meta["env_config"]["deployed"]["bridge"]["call_period"] == load_bridge_timing().call_period
+    env = FR5Env("reach", config={"randomisation": {"enabled": True, "guard_share": 1.0},
+                                  "deployed": {"guard": {"ramp_time": 1.25}}})
+    try:
+        assert env.episode.chain.guard.settings.ramp_time == 1.25
+    finally:
+        env.close()

@@ -43,11 +43,11 @@ def test_starts_lie_along_the_experts_trajectory(grasp_env):
         env = grasp_env.unwrapped
         prefixes.append(info["expert_steps"])
         assert 0 <= info["expert_steps"] <= 70
-        assert env._steps == info["expert_steps"]  # the prefix counts toward the step limit
+        assert env.episode.steps == info["expert_steps"]  # the prefix counts toward the step limit
         state = env.task_state()
         lifted += state.object_position[2] - state.object_start_position[2] > 0.02
         # The observation returned is the state the policy starts from, and the episode goes on.
-        np.testing.assert_allclose(observation, env._observe()[1], atol=1e-6)
+        np.testing.assert_allclose(observation, env.episode.observe()[1], atol=1e-6)
         _, _, terminated, truncated, _ = grasp_env.step(np.zeros(7, dtype=np.float32))
         assert not truncated
     assert len(set(prefixes)) > 10  # drawn, not fixed
@@ -188,7 +188,7 @@ def test_a_saved_episode_goes_on_exactly_as_it_did():
             taken, current = [], observation
             for _ in range(40):
                 current, reward, terminated, truncated, info = env.step(expert.act(current))
-                taken.append((current.tobytes(), reward, terminated, truncated, info["is_success"], env._steps))
+                taken.append((current.tobytes(), reward, terminated, truncated, info["is_success"], env.episode.steps))
                 if terminated or truncated:
                     break
             return taken
@@ -225,15 +225,15 @@ def test_one_replay_serves_several_starts():
             first, info_first = env.reset()
             replayed = steps["count"]
             assert replayed == info_first["expert_steps"]  # one replay to the furthest start
-            placement = inner._object_start
+            placement = inner.episode.object_start
             env.step(np.zeros(7, dtype=np.float32))  # the first episode moves on
             steps["count"] = 0
             second, info_second = env.reset()
             assert steps["count"] == 0  # nothing replayed: the saved start is played
             assert info_second["expert_steps"] <= info_first["expert_steps"]
-            assert inner._steps == info_second["expert_steps"]
-            assert inner._object_start == placement  # the same replay's placement
-            np.testing.assert_allclose(second, inner._observe()[1], atol=1e-6)
+            assert inner.episode.steps == info_second["expert_steps"]
+            assert inner.episode.object_start == placement  # the same replay's placement
+            np.testing.assert_allclose(second, inner.episode.observe()[1], atol=1e-6)
         # A new level discards what was drawn under the one before.
         env.reset()
         env.set_reach_back(None)
@@ -321,12 +321,12 @@ def test_a_prepared_start_is_played_without_a_replay_and_the_two_environments_sw
     observation, info = env.reset()
     assert spare_steps["count"] == prepared_steps  # nothing replayed at the reset itself
     assert env.unwrapped is spare and env._spare.unwrapped is live
-    assert info["expert_steps"] == prepared_steps == spare._steps
-    np.testing.assert_allclose(observation, spare._observe()[1], atol=1e-6)
+    assert info["expert_steps"] == prepared_steps == spare.episode.steps
+    np.testing.assert_allclose(observation, spare.episode.observe()[1], atol=1e-6)
     state = spare.task_state()
     assert state.fingers_object_contact == 2  # late along the expert's grasp: it holds the cup
     _, _, terminated, truncated, _ = env.step(np.zeros(7, dtype=np.float32))
-    assert spare._steps == prepared_steps + 1  # the policy's steps go to the swapped-in one
+    assert spare.episode.steps == prepared_steps + 1  # the policy's steps go to the swapped-in one
     del spare.step
 
 

@@ -285,13 +285,13 @@ def test_zone_agrees_with_the_simulator_geometry():
 
     env = FR5Env(task="reach")
     env.reset(seed=0)
-    body, client = env.robot.body, env.world.client
+    body, client = env.plant.robot.body, env.plant.world.client
     links = {p.getJointInfo(body, j, physicsClientId=client)[12].decode(): j
              for j in range(p.getNumJoints(body, physicsClientId=client))}
     gripper = [links[name] for name in ("gripper_base_link", "finger_left_link", "finger_right_link")]
 
     def forearm_gripper_distance(q):
-        env.robot.reset(np.asarray(q, dtype=float), ROBOT.max_opening_width)
+        env.plant.robot.reset(np.asarray(q, dtype=float), ROBOT.max_opening_width)
         return min(c[8] for g in gripper
                    for c in p.getClosestPoints(body, body, 1.0, links["forearm_Link"], g, physicsClientId=client))
 

@@ -25,7 +25,7 @@ ARM = [f"j{i}" for i in range(1, 7)]
 
 def pybullet_joint_states(env: FR5Env, names) -> List[tuple]:
     """(position, velocity) of each named joint, straight from PyBullet."""
-    robot, client = env.robot.body, env.world.client
+    robot, client = env.plant.robot.body, env.plant.world.client
     by_name = {p.getJointInfo(robot, i, physicsClientId=client)[1].decode(): i
                for i in range(p.getNumJoints(robot, physicsClientId=client))}
     return [p.getJointState(robot, by_name[name], physicsClientId=client)[:2] for name in names]
@@ -39,7 +39,7 @@ def test_joint_states_names_order_and_values(task):
         env.reset(seed=3)
         for _ in range(5):  # moving, so that velocities are not all zero
             env.step(np.array([1.0, -1.0, 0.5, 0.0, 0.0, 0.0, -1.0], dtype=np.float32))
-        states = env.joint_states()
+        states = env.episode.joint_states()
         spec = env.robot_spec
         assert list(states.names) == ARM + list(spec.finger_joint_names)
         assert len(spec.finger_joint_names) == 2 and len(states.positions) == len(states.velocities) == 8
@@ -59,12 +59,12 @@ def test_physics_dt_is_the_configured_step():
     for task, physics_dt in (("reach", 0.01), ("grasp", 0.005)):
         env = FR5Env(task=task)
         try:
-            assert env.physics_dt == physics_dt
+            assert env.episode.physics_dt == physics_dt
         finally:
             env.close()
     env = FR5Env(task="reach", config={"reach": {"simulation": {"physics_dt": 0.005}}})
     try:
-        assert env.physics_dt == 0.005
+        assert env.episode.physics_dt == 0.005
     finally:
         env.close()
 
@@ -81,14 +81,14 @@ def test_advance_physics_tracks_arm_target_and_gripper_width():
         assert open_width == pytest.approx(spec.max_opening_width, abs=1e-3)
         errors = []
         for _ in range(200):  # 1 s of simulated time at 5 ms
-            env.advance_physics(target, 0.0)
+            env.episode.advance_physics(target, 0.0)
             errors.append(float(np.max(np.abs(np.array([q for q, _ in pybullet_joint_states(env, ARM)]) - target))))
         assert errors[0] < 0.3 + 1e-9  # one physics step moved it, a little
         assert errors[-1] < 0.01, errors[-1]
         assert errors[49] < errors[0]
         closed = sum(position for position, _ in pybullet_joint_states(env, spec.finger_joint_names))
         assert closed < 0.1 * open_width  # nothing in between: the fingers closed
-        assert env.gripper_command_width == 0.0
+        assert env.episode.gripper_command_width == 0.0
     finally:
         env.close()
 
@@ -99,10 +99,10 @@ def test_advance_physics_one_step_is_physics_dt():
     try:
         env.reset(seed=2)
         start = env.joint_positions()
-        env.advance_physics(start + np.array([1.0, 0, 0, 0, 0, 0]), env.robot_spec.max_opening_width)
+        env.episode.advance_physics(start + np.array([1.0, 0, 0, 0, 0, 0]), env.robot_spec.max_opening_width)
         moved = abs(env.joint_positions()[0] - start[0])
         # Capped at the joint's velocity limit for one physics step (plus solver slack).
-        assert 0.0 < moved <= env.robot_spec.velocity_limits[0] * env.physics_dt * 1.05
+        assert 0.0 < moved <= env.robot_spec.velocity_limits[0] * env.episode.physics_dt * 1.05
     finally:
         env.close()
 
@@ -115,9 +115,9 @@ def test_judge_period_times_out_at_max_steps():
         hold = env.joint_positions()
         verdicts = []
         for _ in range(6):
-            for _ in range(int(round(env.control_dt / env.physics_dt))):
-                env.advance_physics(hold, env.robot_spec.max_opening_width)
-            verdicts.append(env.judge_period())
+            for _ in range(int(round(env.control_dt / env.episode.physics_dt))):
+                env.episode.advance_physics(hold, env.robot_spec.max_opening_width)
+            verdicts.append(env.episode.judge_period())
         assert all(isinstance(v, EpisodeVerdict) for v in verdicts)
         assert [v.steps for v in verdicts] == [1, 2, 3, 4, 5, 6]
         assert not any(v.ended or v.success or v.failure for v in verdicts[:-1])
@@ -126,7 +126,7 @@ def test_judge_period_times_out_at_max_steps():
         assert last.failure == "timeout" and last.outcome.failure is None and not last.success
         assert set(last.terms) == {"approach", "orientation", "gripper"}
         env.reset(seed=0)  # the count starts over
-        assert env.judge_period().steps == 1
+        assert env.episode.judge_period().steps == 1
     finally:
         env.close()
 
@@ -145,7 +145,7 @@ def test_step_times_out_with_the_same_verdict():
 
 def record_arm_commands(env: FR5Env) -> list:
     """Every (arm targets, opening width) the environment sends to the robot."""
-    robot, original, commands = env.robot, env.robot.command, []
+    robot, original, commands = env.plant.robot, env.plant.robot.command, []
 
     def command(joint_targets, opening_width, period=None):
         commands.append((list(joint_targets), opening_width))
@@ -184,11 +184,11 @@ def test_judge_period_gives_the_verdicts_step_gives(actor):
             assert results[-1][2]["failure"] in ("collision", "timeout")
 
         replayed.reset(seed=seed)
-        substeps = int(round(replayed.control_dt / replayed.physics_dt))
+        substeps = int(round(replayed.control_dt / replayed.episode.physics_dt))
         for step, ((targets, width), (terminated, truncated, info)) in enumerate(zip(commands, results), 1):
             for _ in range(substeps):
-                replayed.advance_physics(targets, width)
-            verdict = replayed.judge_period()
+                replayed.episode.advance_physics(targets, width)
+            verdict = replayed.episode.judge_period()
             assert (verdict.success, verdict.failure, verdict.terminated, verdict.truncated, verdict.steps) == \
                 (info["is_success"], info["failure"], terminated, truncated, step)
             assert {f"term_{name}": value for name, value in verdict.terms.items()} == \
@@ -213,7 +213,7 @@ def test_advance_period_reproduces_step_exactly():
         states, verdicts = [], []
         while True:
             obs, _, terminated, truncated, info = stepped.step(expert.act(obs))
-            states.append(stepped.joint_states())
+            states.append(stepped.episode.joint_states())
             verdicts.append((info["is_success"], info["failure"], terminated, truncated))
             if terminated or truncated:
                 break
@@ -222,9 +222,9 @@ def test_advance_period_reproduces_step_exactly():
 
         replayed.reset(seed=seed)
         for (targets, width), state, expected in zip(commands, states, verdicts):
-            replayed.advance_period(targets, width)
-            verdict = replayed.judge_period()
-            assert replayed.joint_states() == state
+            replayed.episode.advance_period(targets, width)
+            verdict = replayed.episode.judge_period()
+            assert replayed.episode.joint_states() == state
             assert (verdict.success, verdict.failure, verdict.terminated, verdict.truncated) == expected
     finally:
         stepped.close()
@@ -235,9 +235,9 @@ def test_object_pose_is_the_simulators():
     env = FR5Env(task="grasp")
     try:
         env.reset(seed=5, options={"object_xy": [-0.5, 0.1]})
-        pose = env.object_pose()
+        pose = env.episode.object_pose()
         assert pose.frame_id == "base_link"
-        position, quaternion = p.getBasePositionAndOrientation(env.world.object_id, physicsClientId=env.world.client)
+        position, quaternion = p.getBasePositionAndOrientation(env.plant.world.object_id, physicsClientId=env.plant.world.client)
         assert pose.position == tuple(position) and pose.quaternion == tuple(quaternion)
         assert pose.position[:2] == pytest.approx((-0.5, 0.1))
         assert pose.position[2] == pytest.approx(env.object_rest_z)
@@ -250,7 +250,7 @@ def test_scene_describes_table_and_object_as_placed():
     env = FR5Env(task="reach", config={"object": {"shape": "box"}})
     try:
         env.reset(seed=0)
-        scene = env.scene()
+        scene = env.episode.scene()
         cfg = env.cfg
         assert scene.frame_id == "base_link"
         assert scene.table_size == tuple(cfg.table.size)
@@ -264,12 +264,12 @@ def test_scene_describes_table_and_object_as_placed():
     env = FR5Env(task="grasp", config={"randomisation": {"enabled": True, "object_size_scale": [1.5, 1.5]}})
     try:
         env.reset(seed=0)
-        scene = env.scene()
+        scene = env.episode.scene()
         assert scene.object_shape == "cylinder"
         assert scene.object_dims == pytest.approx((0.025 * 1.5, 0.06 * 1.5))  # as placed, not nominal
         assert scene.object_size == pytest.approx((0.075, 0.075, 0.09))
         # The simulator's object has that size: its collision box spans the scene's height.
-        low, high = p.getAABB(env.world.object_id, physicsClientId=env.world.client)
+        low, high = p.getAABB(env.plant.world.object_id, physicsClientId=env.plant.world.client)
         assert high[2] - low[2] == pytest.approx(0.09, abs=2e-3)
     finally:
         env.close()
@@ -295,12 +295,12 @@ def test_reset_takes_the_rest_height_from_env_config_object_rest_z(monkeypatch):
         size = calls[0][1]
         assert 0.8 <= size <= 1.2 and size != 1.0
         expected = object_rest_z(env.cfg, size) + 0.001
-        assert env.object_rest_z == expected == env.scene().object_rest_z
+        assert env.object_rest_z == expected == env.episode.scene().object_rest_z
         assert info["object_start"][2] == expected
-        assert env.object_pose().position[2] == pytest.approx(expected, abs=1e-12)
+        assert env.episode.object_pose().position[2] == pytest.approx(expected, abs=1e-12)
         # and the nominal half height scaled by the drawn size, on the table
         assert object_rest_z(env.cfg, size) == pytest.approx(0.03 * size)
-        assert env.scene().object_dims[1] == pytest.approx(0.06 * size)
+        assert env.episode.scene().object_dims[1] == pytest.approx(0.06 * size)
     finally:
         env.close()
 
@@ -348,26 +348,32 @@ def test_pybullet_import_check_finds_imports(tmp_path):
     assert pybullet_imports(tmp_path) == ["b.py:1", "c.py:2", "ros/a.py:4"]
 
 
-def env_internals_used(path: Path) -> List[str]:
-    """``line: expression`` of every attribute the file reads off an ``env`` (``env.x`` or
-    ``self.env.x``) that is an FR5Env internal: world, robot, task, cfg or a private name."""
+def episode_internals_used(path: Path) -> List[str]:
+    """``line: expression`` of every attribute the file reads off a ``sim`` (``sim.x`` or
+    ``self.sim.x``, an :class:`~fr5_rl.episode.Episode`) below its API: the plant's PyBullet
+    world or robot, the task or chain's insides, or a private name."""
     found = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         if not isinstance(node, ast.Attribute):
             continue
         owner = node.value
-        is_env = (isinstance(owner, ast.Name) and owner.id == "env") or \
-            (isinstance(owner, ast.Attribute) and owner.attr == "env")
-        if is_env and (node.attr in ("world", "robot", "task", "cfg") or node.attr.startswith("_")):
+        is_sim = (isinstance(owner, ast.Name) and owner.id == "sim") or \
+            (isinstance(owner, ast.Attribute) and owner.attr == "sim")
+        if is_sim and (node.attr in ("plant", "chain", "task", "cfg") or node.attr.startswith("_")):
             found.append((node.lineno, f"{node.lineno}: {ast.unparse(node)}"))
     return [text for _, text in sorted(found)]
 
 
-def test_simulator_node_uses_only_the_env_public_api(tmp_path):
-    assert env_internals_used(PACKAGE / "ros" / "sim_node.py") == []
+@pytest.mark.parametrize("stand_in", ["ros/sim_node.py", "ros/sim_loops.py", "chain_emulation.py",
+                                      "sim_to_real/replay.py"])
+def test_the_stand_ins_use_only_the_episodes_api(stand_in):
+    assert episode_internals_used(PACKAGE / stand_in) == []
+
+
+def test_the_api_check_finds_what_reaches_below_it(tmp_path):
     probe = tmp_path / "probe.py"
-    probe.write_text("env.world.client\nself.env.task.judge\nself.env.scene()\nenv._steps\n")
-    assert env_internals_used(probe) == ["1: env.world", "2: self.env.task", "4: env._steps"]
+    probe.write_text("sim.plant.world.client\nself.sim.task.judge\nself.sim.scene()\nsim._steps\n")
+    assert episode_internals_used(probe) == ["1: sim.plant", "2: self.sim.task", "4: sim._steps"]
 
 
 def timing_env(delay, age):
@@ -405,14 +411,14 @@ def test_observation_age_observes_an_earlier_joint_state():
         for env in (aged, fresh):
             env.reset(seed=2)
         measured = []
-        original = aged.robot.measure
-        aged.robot.measure = lambda: measured.append(original()) or measured[-1]
+        original = aged.plant.robot.measure
+        aged.plant.robot.measure = lambda: measured.append(original()) or measured[-1]
         obs_aged = aged.step(action)[0]
         obs_fresh = fresh.step(action)[0]
         np.testing.assert_array_equal(aged.joint_positions(), fresh.joint_positions())  # same physics
         early = measured[0][0]  # the first measurement of the step: taken two steps early
         assert not np.allclose(early, aged.joint_positions())
-        np.testing.assert_allclose(aged._observed_joint_positions, early)
+        np.testing.assert_allclose(aged.episode.chain.observed_joint_positions, early)
         assert not np.allclose(obs_aged[:6], obs_fresh[:6])
     finally:
         aged.close()

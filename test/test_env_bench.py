@@ -10,7 +10,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools" / "bench"))
 
-import env_and_inference as bench  # noqa: E402
+import env_floor as bench  # noqa: E402
 from fr5_rl.envs import FR5Env  # noqa: E402
 
 

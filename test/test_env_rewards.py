@@ -104,7 +104,7 @@ def test_plain_episode_share_draws_some_episodes_without_randomisation():
     latencies = []
     for seed in range(60):
         env.reset(seed=seed)
-        latencies.append((env._latency_steps, env._obs_noise_std))
+        latencies.append((env.episode.draws.action_latency_steps, env.episode.draws.observation_noise_std))
     env.close()
     assert set(latencies) == {(0, 0.0), (2, 0.004)}
     plain = sum(latency == (0, 0.0) for latency in latencies)
@@ -112,7 +112,7 @@ def test_plain_episode_share_draws_some_episodes_without_randomisation():
 
     always = FR5Env(task="reach", config={"randomisation": perturbed})
     always.reset(seed=0)
-    assert always._latency_steps == 2
+    assert always.episode.draws.action_latency_steps == 2
     always.close()
     from fr5_rl.config import ConfigError
 
@@ -134,15 +134,15 @@ def test_target_action_latency_steps_replaces_the_latency_only_where_the_camera_
         for seed in range(40):
             _, info_before = before.reset(seed=seed)
             _, info_tied = tied.reset(seed=seed)
-            assert (before._target is None) == (tied._target is None)
-            assert before._object_dims == tied._object_dims
-            if before._target is None:
+            assert (before.episode.draws.target is None) == (tied.episode.draws.target is None)
+            assert before.episode.draws.object_dims == tied.episode.draws.object_dims
+            if before.episode.draws.target is None:
                 np.testing.assert_array_equal(info_before["object_start"], info_tied["object_start"])
-                assert before._latency_steps == tied._latency_steps == 2
+                assert before.episode.draws.action_latency_steps == tied.episode.draws.action_latency_steps == 2
             else:
-                assert before._latency_steps == 2
-                camera_latencies.append(tied._latency_steps)
-                assert before._target.latency == tied._target.latency
+                assert before.episode.draws.action_latency_steps == 2
+                camera_latencies.append(tied.episode.draws.action_latency_steps)
+                assert before.episode.draws.target.latency == tied.episode.draws.target.latency
     finally:
         before.close()
         tied.close()
@@ -163,14 +163,14 @@ def test_gripper_latency_steps_delays_the_gripper_apart_from_the_arm(arm_steps, 
         "gripper_latency_steps": [gripper_steps, gripper_steps]}})
     try:
         env.reset(seed=3)
-        open_width = env.gripper_command_width
+        open_width = env.episode.gripper_command_width
         action = np.zeros(7, dtype=np.float32)
         action[0], action[6] = 1.0, -1.0  # j1 on, gripper closed
         start_j1 = float(env.joint_positions()[0])
         widths, j1_moved = [], []
         for _ in range(4):
             env.step(action)
-            widths.append(env.gripper_command_width)
+            widths.append(env.episode.gripper_command_width)
             j1_moved.append(abs(float(env.joint_positions()[0]) - start_j1) > 1e-3)
     finally:
         env.close()
@@ -197,7 +197,7 @@ def test_gripper_latency_equal_to_the_arms_rolls_out_as_without_the_key(steps):
             obs_apart, reward_apart, *_ = apart.step(action)
             np.testing.assert_array_equal(obs_shared, obs_apart)
             assert reward_shared == reward_apart
-        assert apart._gripper_latency_steps == steps and shared._gripper_latency_steps is None
+        assert apart.episode.draws.gripper_latency_steps == steps and shared.episode.draws.gripper_latency_steps is None
     finally:
         shared.close()
         apart.close()
@@ -215,7 +215,8 @@ def test_timing_share_leaves_some_perturbed_episodes_with_whole_step_latency_onl
     drawn = []
     for seed in range(60):
         env.reset(seed=seed)
-        drawn.append((env._latency_steps, env._command_delay_range, env._observation_age_range))
+        draws = env.episode.draws
+        drawn.append((draws.action_latency_steps, draws.command_delay_s, draws.observation_age_s))
     env.close()
     assert set(drawn) == {(2, (0.0, 0.0), (0.0, 0.0)), (2, (0.0, 0.02), (0.0, 0.01))}
     untimed = sum(d[1] == (0.0, 0.0) for d in drawn)

@@ -47,14 +47,14 @@ def make(task: str, **config) -> FR5Env:
 
 def joint_indices(env: FR5Env, names) -> list:
     """PyBullet joint indices looked up by name (independent of FR5Robot's maps)."""
-    robot, client = env.robot.body, env.world.client
+    robot, client = env.plant.robot.body, env.plant.world.client
     by_name = {p.getJointInfo(robot, i, physicsClientId=client)[1].decode(): i
                for i in range(p.getNumJoints(robot, physicsClientId=client))}
     return [by_name[n] for n in names]
 
 
 def tcp_link_index(env: FR5Env) -> int:
-    robot, client = env.robot.body, env.world.client
+    robot, client = env.plant.robot.body, env.plant.world.client
     for i in range(p.getNumJoints(robot, physicsClientId=client)):
         if p.getJointInfo(robot, i, physicsClientId=client)[12].decode() == "tcp":
             return i
@@ -62,26 +62,26 @@ def tcp_link_index(env: FR5Env) -> int:
 
 
 def tcp_pose_pybullet(env: FR5Env):
-    state = p.getLinkState(env.robot.body, tcp_link_index(env), computeForwardKinematics=1,
-                           physicsClientId=env.world.client)
+    state = p.getLinkState(env.plant.robot.body, tcp_link_index(env), computeForwardKinematics=1,
+                           physicsClientId=env.plant.world.client)
     return np.array(state[4]), np.array(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)
 
 
 def measured_arm_positions(env: FR5Env) -> np.ndarray:
-    states = p.getJointStates(env.robot.body, joint_indices(env, [f"j{i}" for i in range(1, 7)]),
-                              physicsClientId=env.world.client)
+    states = p.getJointStates(env.plant.robot.body, joint_indices(env, [f"j{i}" for i in range(1, 7)]),
+                              physicsClientId=env.plant.world.client)
     return np.array([s[0] for s in states])
 
 
 def record_commands(env: FR5Env) -> list:
     """Intercept every arm command: (targets, arm position PyBullet reports at that moment)."""
-    robot = env.robot
+    robot = env.plant.robot
     original = robot.command
     records = []
 
-    def command(joint_targets, opening_width):
+    def command(joint_targets, opening_width, period=None):
         records.append((np.array(joint_targets, dtype=np.float64), measured_arm_positions(env)))
-        original(joint_targets, opening_width)
+        original(joint_targets, opening_width, period=period)
 
     robot.command = command
     return records
@@ -169,7 +169,7 @@ def test_render_beside_envs_without_renderer():
         assert red.sum() > 20, "the object is not in the picture"
         assert quiet_before.render() is None
         with pytest.raises(RuntimeError, match="render_mode='rgb_array'"):
-            quiet_after.world.render()
+            quiet_after.plant.world.render()
     finally:
         for env in (quiet_before, drawing, quiet_after):
             env.close()
@@ -180,7 +180,7 @@ def test_spaces_and_control_dt(env_id, size):
     env = gym.make(env_id)
     try:
         assert env.unwrapped.control_dt == 0.02
-        assert env.unwrapped.world.substeps * env.unwrapped.world.physics_dt == pytest.approx(0.02)
+        assert env.unwrapped.plant.world.substeps * env.unwrapped.plant.world.physics_dt == pytest.approx(0.02)
         assert env.observation_space.shape == (size,)
         assert env.action_space.shape == (7,)
         np.testing.assert_array_equal(env.action_space.low, -1.0)
@@ -287,13 +287,13 @@ def test_an_untouched_object_rests_asleep_after_its_first_physics_step(task):
     try:
         for seed in range(4):
             env.reset(seed=seed)
-            placed = env.object_pose()
+            placed = env.episode.object_pose()
             env.step(np.zeros(7, dtype=np.float32))
-            settled = env.object_pose()
+            settled = env.episode.object_pose()
             assert settled != placed  # the first step settles it onto the table
             for _ in range(40):  # the arm holds its start, clear of the object
                 env.step(np.zeros(7, dtype=np.float32))
-            assert env.object_pose() == settled, seed
+            assert env.episode.object_pose() == settled, seed
     finally:
         env.close()
 
@@ -324,18 +324,18 @@ def test_scripted_expert_reach_success_is_real():
             successes += 1
             assert info["failure"] is None
             tcp, rotation = tcp_pose_pybullet(env)
-            obj = np.array(p.getBasePositionAndOrientation(env.world.object_id,
-                                                           physicsClientId=env.world.client)[0])
+            obj = np.array(p.getBasePositionAndOrientation(env.plant.world.object_id,
+                                                           physicsClientId=env.plant.world.client)[0])
             assert np.linalg.norm(env.tcp_position() - env.object_position()) <= 0.015
             assert np.linalg.norm(tcp - obj) <= 0.015, seed
             angle = math.degrees(math.acos(np.clip(-rotation[2, 2], -1.0, 1.0)))
             assert angle <= 15.0, (seed, angle)
-            width = sum(p.getJointState(env.robot.body, j, physicsClientId=env.world.client)[0]
+            width = sum(p.getJointState(env.plant.robot.body, j, physicsClientId=env.plant.world.client)[0]
                         for j in finger_joints)
             assert width >= cfg.min_open_width
             # no robot link other than the finger pads touches anything
-            for contact in p.getContactPoints(bodyA=env.robot.body, physicsClientId=env.world.client):
-                assert contact[2] == env.world.object_id and contact[3] in finger_joints, contact
+            for contact in p.getContactPoints(bodyA=env.plant.robot.body, physicsClientId=env.plant.world.client):
+                assert contact[2] == env.plant.world.object_id and contact[3] in finger_joints, contact
         assert successes >= 9, f"scripted expert solved reach on only {successes}/10 seeds"
     finally:
         env.close()
@@ -347,7 +347,7 @@ def test_reach_success_needs_pointing_down():
     try:
         info = run_expert(env, 0)
         assert info["is_success"]
-        state, _ = env._observe()
+        state = env.task_state()
         judged = env.task.judge(state, env.control_dt)
         assert judged.success
         state.tcp_approach_axis = (0.0, 0.0, 1.0)  # tcp z axis pointing straight up
@@ -370,7 +370,7 @@ def test_driving_into_table_is_a_collision(task, joints):
         action = np.zeros(7, dtype=np.float32)
         action[list(joints)] = 1.0
         action[6] = 1.0
-        robot, table, client = env.robot.body, env.world.table_id, env.world.client
+        robot, table, client = env.plant.robot.body, env.plant.world.table_id, env.plant.world.client
         start_height = tcp_pose_pybullet(env)[0][2]
         for step in range(150):
             _, reward, terminated, truncated, info = env.step(action)
@@ -385,7 +385,7 @@ def test_driving_into_table_is_a_collision(task, joints):
         assert info["reward_collision"] == -env.cfg.reward.collision_penalty < 0
         assert reward < 0
         assert tcp_pose_pybullet(env)[0][2] < start_height - 0.1  # it really went down
-        assert not p.getContactPoints(bodyA=robot, bodyB=env.world.object_id, physicsClientId=client)
+        assert not p.getContactPoints(bodyA=robot, bodyB=env.plant.world.object_id, physicsClientId=client)
     finally:
         env.close()
 
@@ -399,7 +399,7 @@ def test_every_link_of_the_robot_meets_other_bodies():
     env = make("grasp")
     try:
         env.reset(seed=0, options={"object_xy": FAR_CORNER})
-        client, robot = env.world.client, env.robot.body
+        client, robot = env.plant.world.client, env.plant.robot.body
         links = [link for link in range(-1, p.getNumJoints(robot, physicsClientId=client))
                  if p.getCollisionShapeData(robot, link, physicsClientId=client)]
         assert len(links) >= 9  # the base, six arm links, the gripper's body and fingers
@@ -418,7 +418,7 @@ def test_every_link_of_the_robot_meets_other_bodies():
             assert touches_box == (link >= 0), link  # the base is static as the box is: never paired
             p.removeBody(ball, physicsClientId=client)
             p.removeBody(box, physicsClientId=client)
-        table_contacts = p.getContactPoints(bodyA=robot, bodyB=env.world.table_id, physicsClientId=client)
+        table_contacts = p.getContactPoints(bodyA=robot, bodyB=env.plant.world.table_id, physicsClientId=client)
         assert not table_contacts  # standing on it is not touching it
     finally:
         env.close()
@@ -431,9 +431,9 @@ def test_every_joint_is_capped_at_the_fastest_rated_joint_speed():
     env = make("reach")
     try:
         env.reset(seed=0, options={"object_xy": FAR_CORNER})
-        client, robot = env.world.client, env.robot.body
+        client, robot = env.plant.world.client, env.plant.robot.body
         cap = float(max(env.robot_spec.velocity_limits))
-        joints = env.robot.all_joints
+        joints = env.plant.robot.all_joints
         p.setJointMotorControlArray(robot, joints, p.VELOCITY_CONTROL, targetVelocities=[10.0] * len(joints),
                                     forces=[1e4] * len(joints), physicsClientId=client)
         fastest = 0.0
@@ -441,7 +441,7 @@ def test_every_joint_is_capped_at_the_fastest_rated_joint_speed():
             p.stepSimulation(physicsClientId=client)
             speeds = [abs(state[1]) for state in p.getJointStates(robot, joints, physicsClientId=client)]
             assert max(speeds) <= cap + 1e-9, speeds
-            fastest = max(fastest, max(speeds[:len(env.robot.arm_joints)]))
+            fastest = max(fastest, max(speeds[:len(env.plant.robot.arm_joints)]))
         assert fastest == pytest.approx(cap, abs=1e-6)
     finally:
         env.close()
@@ -464,8 +464,8 @@ def test_scripted_downward_motion_into_table_is_a_collision():
             if terminated or truncated:
                 break
         assert terminated and info["failure"] == "collision" and not info["is_success"]
-        assert p.getContactPoints(bodyA=env.robot.body, bodyB=env.world.table_id,
-                                  physicsClientId=env.world.client)
+        assert p.getContactPoints(bodyA=env.plant.robot.body, bodyB=env.plant.world.table_id,
+                                  physicsClientId=env.plant.world.client)
     finally:
         env.close()
 
@@ -625,7 +625,7 @@ def test_placement_focus_places_its_share_in_the_focus_region_and_nothing_else_w
             out = []
             for seed in seeds:
                 env.reset(seed=seed)
-                position, _ = p.getBasePositionAndOrientation(env.world.object_id, physicsClientId=env.world.client)
+                position, _ = p.getBasePositionAndOrientation(env.plant.world.object_id, physicsClientId=env.plant.world.client)
                 out.append(position[:2])
             return np.array(out)
         finally:
@@ -656,11 +656,11 @@ def test_an_arm_left_in_place_never_gets_the_object_set_down_inside_its_hand():
             arm = env.joint_positions().tolist()
             _, info = env.reset(seed=seed, options={"arm_positions": arm})
             moved += not np.allclose(info["object_start"], drawn)
-            assert not p.getClosestPoints(env.robot.body, env.world.object_id, 0.02,
-                                          physicsClientId=env.world.client)
+            assert not p.getClosestPoints(env.plant.robot.body, env.plant.world.object_id, 0.02,
+                                          physicsClientId=env.plant.world.client)
             for _ in range(10):
                 env.step(np.zeros(7))
-            position, _ = p.getBasePositionAndOrientation(env.world.object_id, physicsClientId=env.world.client)
+            position, _ = p.getBasePositionAndOrientation(env.plant.world.object_id, physicsClientId=env.plant.world.client)
             np.testing.assert_allclose(position, info["object_start"], atol=2e-3)
         assert moved == 3
         _, info = env.reset(seed=5)
@@ -705,7 +705,7 @@ def test_forward_kinematics_matches_pybullet():
     env = make("reach")
     try:
         fk = ForwardKinematics(env.robot_spec)
-        robot, client = env.robot.body, env.world.client
+        robot, client = env.plant.robot.body, env.plant.world.client
         arm = joint_indices(env, [f"j{i}" for i in range(1, 7)])
         rng = np.random.default_rng(2024)
         configs = [np.zeros(6), FR5_LOWER.copy(), FR5_UPPER.copy()]

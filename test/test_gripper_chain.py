@@ -82,15 +82,15 @@ def test_the_environment_observes_the_chains_read_back_in_bridge_episodes():
     env = FR5Env(task="grasp", config={"randomisation": {**PERTURBED, "gripper_bridge_share": 1.0,
                                                          "gripper_bridge_emulation": True}})
     try:
-        assert isinstance(env._bridge_model, EmulatedGripperChain)
+        assert isinstance(env.episode.chain.bridge_model, EmulatedGripperChain)
         env.reset(seed=5)
         close = np.zeros(7)
         close[6] = -1.0
         seen, measured = [], []
         for _ in range(25):
             env.step(close)
-            seen.append(env._bridge.read_width)
-            measured.append(sum(env.joint_states().positions[6:]))
+            seen.append(env.episode.chain.bridge.read_width)
+            measured.append(sum(env.episode.joint_states().positions[6:]))
         assert all(whole_percent(width) for width in seen)
         assert measured[-1] < MAX_WIDTH - 0.02  # the fingers closed ...
         assert np.mean(np.asarray(seen) - np.asarray(measured)) > 0.002  # ... and the read-back lagged them
@@ -106,7 +106,7 @@ def test_the_new_keys_draw_nothing_unless_asked_for():
         env = FR5Env(task="grasp", config={"randomisation": {**PERTURBED, "gripper_bridge_share": 0.5, **extra}})
         try:
             if not extra:
-                assert env._guard is None and isinstance(env._bridge_model, BridgedGripper)
+                assert env.episode.chain.guard is None and isinstance(env.episode.chain.bridge_model, BridgedGripper)
             obs, _ = env.reset(seed=11)
             steps = [obs] + [env.step(action)[0] for action in np.random.default_rng(0).uniform(-1, 1, (30, 7))]
             return np.array(steps)

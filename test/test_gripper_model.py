@@ -83,8 +83,8 @@ def test_the_environment_observes_the_read_back_in_bridge_episodes():
         seen, measured = [], []
         for _ in range(20):
             obs, *_ = env.step(close)
-            seen.append(env._bridge.read_width)
-            measured.append(sum(env.joint_states().positions[6:]))
+            seen.append(env.episode.chain.bridge.read_width)
+            measured.append(sum(env.episode.joint_states().positions[6:]))
         # Whole percent, changing at most every 5 steps (10 Hz against 50 Hz), lagging the fingers.
         assert all(100 * w / MAX_WIDTH == pytest.approx(round(100 * w / MAX_WIDTH)) for w in seen)
         changes = [k for k in range(1, len(seen)) if seen[k] != seen[k - 1]]
@@ -144,7 +144,7 @@ def test_the_environment_sees_the_object_late_in_camera_episodes():
                                                           "target_latency_s": [0.15, 0.15]}})
     try:
         env.reset(seed=2)
-        target = env._target
+        target = env.episode.chain.target
         assert target is not None and target.latency == pytest.approx(0.15)
         seen = []
         observe = target.observe
@@ -157,7 +157,7 @@ def test_the_environment_sees_the_object_late_in_camera_episodes():
         target.observe = spy
         start = env.object_position().copy()
         # Push the object 5 cm under the camera's nose: the policy sees it move one latency late.
-        env.world.place_object((start[0] + 0.05, start[1], start[2]), yaw=0.0)
+        env.plant.world.place_object((start[0] + 0.05, start[1], start[2]), yaw=0.0)
         for _ in range(15):
             env.step(np.zeros(7))
         first_seen = next(now for now, x in seen if x > start[0] + 0.04)
@@ -217,7 +217,7 @@ def test_the_environment_holds_the_target_while_the_tcp_is_within_the_hidden_rad
         try:
             obs, _ = env.reset(seed=2)
             start = env.object_position().copy()
-            env.world.place_object((start[0] + 0.05, start[1], start[2]), yaw=0.0)
+            env.plant.world.place_object((start[0] + 0.05, start[1], start[2]), yaw=0.0)
             for _ in range(5):
                 later, *_ = env.step(np.zeros(7))
             scale = env.cfg.observation.relative_position_scale

@@ -313,13 +313,13 @@ def test_simulator_holds_the_cup_fixed_in_the_tcp_while_the_arm_moves():
     env = FR5Env(task="reach", config={"reach": {"simulation": {"physics_dt": 0.005}}})
     try:
         env.reset(seed=1_100_000)
-        held = HeldObject(env.world.client, env.robot.body, env.robot.tcp_link, env.world.object_id,
-                          [env.world.table_id])
+        held = HeldObject(env.plant.world.client, env.plant.robot.body, env.plant.robot.tcp_link, env.plant.world.object_id,
+                          [env.plant.world.table_id])
         held.hold(CUP_IN_TCP)
         start = env.joint_positions()
         for step in range(600):  # 3 s: a slow move, then rest
             share = min(1.0, step / 400)
-            env.advance_physics(start + share * np.array([0.2, -0.1, 0.1, 0.2, -0.2, 0.4]), 0.05)
+            env.episode.advance_physics(start + share * np.array([0.2, -0.1, 0.1, 0.2, -0.2, 0.4]), 0.05)
         pose = tcp_poses_from_joints(ROBOT, [env.joint_positions()])[0]
         expected = pose[:3, :3] @ CUP_IN_TCP + pose[:3, 3]
         assert np.linalg.norm(env.object_position() - expected) < 0.001

@@ -51,17 +51,25 @@ GRAPH = import_graph()
 # Which layers each layer may import. Anything not listed (config, kinematics, observation,
 # control, transforms: the shared layer) imports only the shared layer.
 ALLOWED = {
-    "ros": {"ros", "deploy", "perception", "drivers", "shared", "envs", "sim", "tasks"},
+    # The simulator node runs an episode (plant, chain, task), not the gym environment.
+    "ros": {"ros", "deploy", "perception", "drivers", "shared", "episode", "episode_runner", "sim", "tasks"},
     "cli": {"training", "deploy", "shared", "envs", "expert", "sim", "tasks", "cli", "sim_to_real"},
     # Record, replay, compare and fit (compare_run.py, fit_driver.py): tools, never deployed.
-    "sim_to_real": {"sim_to_real", "shared", "envs", "sim", "tasks"},
+    "sim_to_real": {"sim_to_real", "shared", "episode", "sim", "tasks"},
     "training": {"training", "deploy", "shared", "envs", "expert", "sim", "tasks"},
     # The rehearsal's chain in one process: the simulator, the drivers and the deployed node's code.
-    "chain_emulation": {"shared", "envs", "sim", "tasks", "deploy", "drivers"},
+    "chain_emulation": {"shared", "episode", "sim", "tasks", "deploy", "drivers"},
     "deploy": {"deploy", "shared"},
     "perception": {"perception", "shared"},
     "drivers": {"drivers", "shared"},
-    "envs": {"shared", "sim", "tasks"},
+    # The simulator node's episodes without ROS: phases, commands, records.
+    "episode_runner": {"shared", "episode", "sim", "tasks"},
+    # gymnasium's API around one episode.
+    "envs": {"shared", "episode", "tasks"},
+    # One episode: the plant (sim), the control chain, the task.
+    "episode": {"shared", "sim", "tasks", "control_chain"},
+    # Between the policy's action and the plant: the chain's timing, bridge, guard and camera.
+    "control_chain": {"shared", "sim"},
     "expert": {"shared", "envs", "sim", "tasks"},
     # The simulator emulates a cell's hardware around the drivers' own code (the gripper chain).
     "sim": {"shared", "sim", "drivers"},
@@ -69,7 +77,7 @@ ALLOWED = {
     "shared": {"shared"},
 }
 SHARED = {"config", "env_config", "kinematics", "observation", "control", "transforms", "gripper", "motion_guard",
-          "help_text", "fr5_rl"}
+          "help_text", "draws", "fr5_rl"}
 
 
 def kind(module: str) -> str:

@@ -254,7 +254,7 @@ def test_the_node_estimates_velocities_as_the_environment_does():
     try:
         observation, _ = env.reset(seed=11)
         for period in range(30):
-            states = env.joint_states()
+            states = env.episode.joint_states()
             stamp = 1.0 + period * DT
             reader.update(states.names, states.positions, [0.0] * len(states.names), stamp, stamp)
             assert isinstance(step(StepInputs(stamp, reader.reading(), Reading(tuple(env.object_position()), stamp))),

@@ -44,7 +44,7 @@ def test_every_arm_builds_its_environment_with_its_cell_and_stays_within_its_rat
         # The arm in the simulator is the one described: its tcp where the kinematics puts it.
         from fr5_rl.kinematics import ForwardKinematics
 
-        joints = env.joint_states().positions[:6]
+        joints = env.episode.joint_states().positions[:6]
         np.testing.assert_allclose(env.tcp_position(), ForwardKinematics(spec).tcp_pose(joints)[0], atol=1e-6)
     finally:
         env.close()

@@ -66,6 +66,20 @@ SHIPPED_RANDOMISATION = {
     "plain_episode_share": 0.25,
 }
 
+# Every chain part the environment can draw at once, so that a change to one of them shows even
+# where no shipped model trains on it: the driver's response, the bridged gripper (its timing
+# model), the gripper's own latency, the camera's timing with its own action latency, the
+# motion guard, velocities estimated from positions.
+EVERY_CHAIN_PART = {
+    "observation": {"joint_velocity_source": "positions", "previous_actions": 2},
+    "randomisation": {**SHIPPED_RANDOMISATION, "response_time_constant_s": [0.02, 0.02, 0.03, 0.01, 0.01, 0.01],
+                      "gripper_bridge_share": 0.6, "gripper_latency_steps": [0, 3], "target_share": 0.7,
+                      "target_latency_s": [0.05, 0.2], "target_action_latency_steps": [1, 2],
+                      "target_hidden_radius": 0.1, "guard_share": 0.5, "timing_share": 0.8,
+                      "physics_dt_choices": [0.004, 0.005], "placement_focus_share": 0.3,
+                      "placement_focus_low": [-0.7, -0.3], "placement_focus_high": [-0.6, 0.3]},
+}
+
 
 def random_actor(seed: int) -> Callable[[np.ndarray], np.ndarray]:
     rng = np.random.default_rng(seed)
@@ -85,6 +99,7 @@ def main(argv=None) -> int:
         results[f"{task}/random"] = rollout_digest(task, {}, random_actor(1), seeds)
         randomisation = {"randomisation": SHIPPED_RANDOMISATION}
         results[f"{task}/randomised"] = rollout_digest(task, randomisation, random_actor(2), seeds)
+        results[f"{task}/every_chain_part"] = rollout_digest(task, EVERY_CHAIN_PART, random_actor(3), seeds)
     for model_dir in sorted(p for p in (ROOT / "models").iterdir() if (p / "meta.json").is_file()):
         policy = load_policy(model_dir)
         meta = json.loads((model_dir / "meta.json").read_text())

@@ -19,12 +19,13 @@ from .deploy.joint_state import FreshStateWait, JointStateReader, Reading, veloc
 from .drivers.gripper_bridge import GripperBridge, GripperReading
 from .drivers.gripper_bridge_params import GripperBridgeParams
 from .env_config import load_env_config
-from .envs import FR5Env
+from .episode import Episode
 from .motion_guard import load_guard_settings
 from .observation import DelayedTarget
-from .sim.controller_emulator import ControllerEmulator, ControllerEmulatorSettings
+from .sim.controller_emulator import ControllerEmulator
 from .sim.gripper_chain import ChainClock, InProcessController
-from .sim.servo import ServoCycle
+from .sim.node_params import SimNodeParams, load_sim_node_params
+from .sim.servo import DriverModel
 
 # m, tcp to cup centre: through the whole rehearsal (models/grasp, seeds 1020000-1020019) the
 # detector's first "hidden" came at 0.075-0.141 m and 99 % of its "seen" frames at >= 0.179 m
@@ -32,12 +33,10 @@ from .sim.servo import ServoCycle
 CAMERA_HIDDEN_RADIUS_M = 0.15
 
 
-def simulator_profile(profile: str) -> Dict[str, Any]:
-    """The simulator node's parameters for ``profile``, as sim_policy.launch loads them."""
-    params = dict(load_yaml(package_root() / "config" / "sim_node.yaml"))
-    if profile == "fairino":
-        params.update(load_yaml(package_root() / "config" / "sim_node_fairino.yaml"))
-    return params
+def simulator_profile(profile: str) -> SimNodeParams:
+    """The simulator node's parameters for ``profile`` (``default`` or ``fairino``), as
+    sim_policy.launch loads them."""
+    return load_sim_node_params(profile)
 
 
 @dataclass(frozen=True)
@@ -60,35 +59,35 @@ class Chain:
     target: str = "simulator"
 
     @classmethod
-    def of(cls, params: Dict[str, Any], args: argparse.Namespace) -> "Chain":
-        bridge = params.get("gripper_interface", "topic") == "xmlrpc"
-        velocity_source = args.velocity_source or ("driver" if params.get("publish_velocities", True) else "positions")
+    def of(cls, params: SimNodeParams, args: argparse.Namespace) -> "Chain":
+        bridge = params.gripper_interface == "xmlrpc"
+        velocity_source = args.velocity_source or ("driver" if params.publish_velocities else "positions")
         return cls(finger_source=args.finger_source or ("bridge" if bridge else "driver"),
                    velocity_source=velocity_source,
-                   episode_start=args.episode_start or params.get("episode_start", "reset"),
+                   episode_start=args.episode_start or params.episode_start,
                    publish_velocities=velocity_source == "driver", target=args.target)
 
 
 class ChainEmulation:
     """The simulator, the drivers and the policy node of one chain, on one clock."""
 
-    def __init__(self, env: FR5Env, step: DeploymentStep, chain: Chain, params: Dict[str, Any],
+    def __init__(self, sim: Episode, step: DeploymentStep, chain: Chain, params: SimNodeParams,
                  compute_s: float, rng: np.random.Generator, trained_velocity_source: str,
                  hidden_radius: float = CAMERA_HIDDEN_RADIUS_M,
                  compute_samples_s: Optional[Sequence[float]] = None,
                  state_jitter_s: float = 0.0, fresh_state_wait_s: float = 0.0) -> None:
-        self.env, self.step, self.chain, self.rng = env, step, chain, rng
-        self.robot = env.robot_spec
-        self.physics_dt = float(params["physics_dt"])
-        self.per_period = whole_multiple(env.control_dt, self.physics_dt)
-        self.per_publish = whole_multiple(1.0 / float(params["publish_rate"]), self.physics_dt)
-        servo_rate = float(params["servo_rate"])
-        self.servo = ServoCycle(whole_multiple(1.0 / servo_rate, self.physics_dt) if servo_rate else 0,
-                                int(params["servo_delay_cycles"]), env.joint_positions())
+        self.sim, self.step, self.chain, self.rng = sim, step, chain, rng
+        self.robot = sim.robot_spec
+        self.physics_dt = params.physics_dt
+        self.per_period = whole_multiple(sim.control_dt, self.physics_dt)
+        self.per_publish = whole_multiple(1.0 / params.publish_rate, self.physics_dt)
+        self.driver = DriverModel(params.servo_rate, params.servo_delay_cycles,
+                                  params.response_time_constant_s, self.physics_dt,
+                                  sim.joint_positions())
         self.compute_steps = int(round(compute_s / self.physics_dt))
         # Measured compute latencies (s) to draw each period's from, instead of the fixed one.
         self.compute_samples = None if compute_samples_s is None else np.asarray(compute_samples_s, dtype=float)
-        self.pause_steps = int(round(float(params["pause_between_episodes"]) / self.physics_dt))
+        self.pause_steps = int(round(params.pause_between_episodes / self.physics_dt))
         # Each joint state reaches the node up to this much after it was sampled (a late simulator
         # loop, the transport): near the timer's ticks, some periods then find no new state.
         self.state_jitter_s = state_jitter_s
@@ -102,7 +101,7 @@ class ChainEmulation:
         self.reader = JointStateReader(self.robot.joint_names, self.robot.finger_joint_names,
                                        velocities_from_positions=estimate,
                                        max_joint_speeds=self.robot.velocity_limits * guard.glitch_speed_factor,
-                                       estimate_interval=0.9 * env.control_dt)  # as policy_node
+                                       estimate_interval=0.9 * sim.control_dt)  # as policy_node
         self.clock = ChainClock()
         self.fault: Optional[str] = None
         self.emulator: Optional[ControllerEmulator] = None
@@ -110,13 +109,12 @@ class ChainEmulation:
         if chain.finger_source == "bridge":
             self._start_bridge(params)
         self.previous_end: Optional[List[float]] = None
-        camera = load_env_config().randomisation  # the measured camera timing (config/env.yaml)
+        camera = load_env_config().randomisation  # the measured camera timing (config/sim.yaml)
         self.target_latency_s, self.target_period_s = tuple(camera.target_latency_s), 1.0 / camera.target_rate_hz
         self.hidden_radius = hidden_radius
 
-    def _start_bridge(self, params: Dict[str, Any]) -> None:
-        settings = typed(ControllerEmulatorSettings, params["controller_emulator"], "sim_node controller_emulator")
-        self.emulator = ControllerEmulator(settings, 0, self.clock)  # never started: no socket
+    def _start_bridge(self, params: SimNodeParams) -> None:
+        self.emulator = ControllerEmulator(params.controller_emulator, 0, self.clock)  # never started: no socket
         bridge_params = typed(GripperBridgeParams, load_yaml(package_root() / "config" / "gripper_bridge.yaml"),
                               "config/gripper_bridge.yaml")
         finger_names = list(self.robot.finger_joint_names)
@@ -153,7 +151,7 @@ class ChainEmulation:
     def _publish_joint_states(self, k: int) -> None:
         """Sample the driver's joint state at physics step ``k``; it reaches the node at once, or
         a drawn delivery delay later (``state_jitter_s``)."""
-        states = self.env.joint_states()
+        states = self.sim.joint_states()
         arm = len(self.robot.joint_names)
         count = len(states.names) if self.chain.finger_source == "driver" else arm
         velocities = states.velocities[:count] if self.chain.publish_velocities else [0.0] * count
@@ -171,7 +169,7 @@ class ChainEmulation:
 
     def _follow_controller(self) -> float:
         """sim_node._follow_controller: the fingers take the emulated controller's width."""
-        states = self.env.joint_states()
+        states = self.sim.joint_states()
         arm = len(self.robot.joint_names)
         self.emulator.set_measured_width(sum(states.positions[arm:]),
                                          moving=any(abs(speed) > 1e-3 for speed in states.velocities[arm:]))
@@ -180,14 +178,15 @@ class ChainEmulation:
 
     def run_episode(self, seed: int) -> Dict[str, Any]:
         """One episode as the real-time simulator runs it; its outcome and length in periods."""
-        env, step = self.env, self.step
+        sim, step = self.sim, self.step
         if self.chain.episode_start == "go_to_start" and self.previous_end is not None:
-            _, info = env.reset(seed=seed, options={"arm_positions": self.previous_end})
+            sim.start(seed, options={"arm_positions": self.previous_end})
         else:
-            _, info = env.reset(seed=seed)
-        object_start = info["object_start"]
+            sim.start(seed)
+        object_start = sim.object_start
         self._deliver_joint_states(sys.maxsize)  # the pause between episodes outlasts any delivery delay
-        self.servo.reset(env.joint_positions())
+        # A driver's servo loop runs on across episodes, as the simulator node's does.
+        self.driver.reset(sim.joint_positions(), restart_cycle=False)
         step.start_episode()
         self.reader.restart_estimates()  # policy_node.on_reset
         positioning = self.chain.episode_start == "go_to_start"
@@ -235,13 +234,13 @@ class ChainEmulation:
                     positioning, start_move_s = False, k * self.physics_dt
                 if first_command_step is None and not positioning:
                     first_command_step = k
-            env.advance_physics(self.servo.targets_for_step(arm_command), gripper_width)
+            sim.advance_physics(self.driver.targets_for_step(arm_command), gripper_width)
             k += 1
             if first_command_step is not None and (k - first_command_step) % self.per_period == 0:
-                verdict_now = env.judge_period()
+                verdict_now = sim.judge_period()
                 if verdict_now.ended:
                     self._pause(arm_command)
-                    self.previous_end = env.joint_positions().tolist()
+                    self.previous_end = sim.joint_positions().tolist()
                     return {"seed": seed, "object_x": round(float(object_start[0]), 4),
                             "object_y": round(float(object_start[1]), 4),
                             "success": bool(verdict_now.success), "failure": verdict_now.failure,
@@ -261,20 +260,20 @@ class ChainEmulation:
         with its capture time, in the base frame as the node's tf gives it)."""
         now = self.clock.now
         if camera is None:
-            return Reading(tuple(self.env.object_pose().position), now, stamp=now)
-        state = self.env.task_state()
-        held = self.env.held_as_the_camera_sees(state)
+            return Reading(tuple(self.sim.object_pose().position), now, stamp=now)
+        state = self.sim.task_state()
+        held = self.sim.held_as_the_camera_sees(state)
         position = camera.observe(state.object_position, since_start_s, held,
                                   state.tcp_to_object_distance <= self.hidden_radius)
         return Reading(tuple(position), now, stamp=now - since_start_s + camera.seen_at)
 
     def _pause(self, arm_command: Optional[Sequence[float]]) -> None:
         """The simulator's pause between episodes: the arm holds where it ended, the fingers as commanded."""
-        hold = tuple(self.env.joint_positions())
+        hold = tuple(self.sim.joint_positions())
         for _ in range(self.pause_steps):
             self.clock.now += self.physics_dt
             width = self.robot.max_opening_width
             if self.bridge is not None:
                 self._poll_bridge()
                 width = self._follow_controller()
-            self.env.advance_physics(hold, width)
+            self.sim.advance_physics(hold, width)

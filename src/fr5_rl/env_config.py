@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Union
 
+from .gripper import BridgeTiming, load_bridge_timing
+from .motion_guard import MotionGuardSettings
 from .config import (DEFAULT_ROBOT, ConfigError, check_time_constants, deep_update, load_robot_spec, load_yaml,
                      robot_config, typed, whole_multiple)
 
@@ -153,6 +155,8 @@ class GraspConfig:
     hold_time: float  # s
     knocked_over_angle_deg: float
     start_joint_noise: float  # rad
+    close_distance: float  # m, tcp to grasp point within which the shaping asks the gripper to close
+    out_of_reach_margin: float  # m beyond the placement region where a pushed object is out of reach
     grasp_point_height: float = 0.0  # m above the object centre: where the shaping leads the tcp
 
 
@@ -281,6 +285,21 @@ TaskConfig = Union[ReachConfig, GraspConfig]
 
 
 @dataclass(frozen=True)
+class DeployedChainConfig:
+    """What the environment models of the deployed chain's own settings: read from the nodes'
+    files when the configuration is loaded (``config/policy_node.yaml``'s ``guard``,
+    ``config/gripper_bridge.yaml``'s rates), so each is written once and lands in a model's
+    ``meta.json`` with the rest.
+
+    :param guard: the policy node's motion guard (``randomisation.guard_share``'s episodes).
+    :param bridge: the gripper bridge's timing (``randomisation.gripper_bridge_share``'s episodes).
+    """
+
+    guard: MotionGuardSettings
+    bridge: BridgeTiming
+
+
+@dataclass(frozen=True)
 class EnvConfig:
     """``config/env.yaml`` merged with overrides and checked: every section typed.
 
@@ -300,6 +319,7 @@ class EnvConfig:
     reward: RewardConfig
     randomisation: RandomisationConfig
     safety_zone: SafetyZoneConfig
+    deployed: DeployedChainConfig  # from the nodes' files, not env.yaml
 
     def task(self, name: str) -> TaskConfig:
         """The section of task ``name`` (``reach`` or ``grasp``)."""
@@ -372,5 +392,6 @@ def load_env_config(overrides: Optional[Mapping[str, Any]] = None, path: Union[s
     if not isinstance(robot, str):
         raise ConfigError(f"env configuration: 'robot' must be an arm's name, got {robot!r}")
     cell = robot_config(robot).get("cell", {})
+    base["deployed"] = {"guard": load_yaml("policy_node")["guard"], "bridge": dataclasses.asdict(load_bridge_timing())}
     merged = deep_update(deep_update(base, cell), overrides)
     return typed(EnvConfig, merged, "env configuration")

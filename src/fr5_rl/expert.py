@@ -64,7 +64,7 @@ class ScriptedExpert:
         dx, dy, dz = object_x - tcp_x, object_y - tcp_y, grasp_z - tcp_z  # to the grasp point
         horizontal_error = math.sqrt(dx * dx + dy * dy)
         held = grasp and state.fingers_object_contact == 2 and \
-            env.gripper_command_width < env.robot_spec.max_opening_width / 2.0
+            env.episode.gripper_command_width < env.robot_spec.max_opening_width / 2.0
         if held:
             phase = "lift"
             target = (object_x, object_y, state.object_start_position[2] + self.grasp_height_offset + self.lift_clearance)

@@ -29,9 +29,9 @@ sys.path.insert(0, str(HERE))
 from benchlib import REPO, print_verdicts, verdict, write_result  # noqa: E402
 from roslaunch_run import SideLaunch, run_launch  # noqa: E402
 
-from fr5_rl.config import load_robot_spec, load_yaml, typed  # noqa: E402
+from fr5_rl.config import load_robot_spec  # noqa: E402
 from fr5_rl.sim.driver_profile import load_driver_profile, profile_summary, write_driver_profile  # noqa: E402
-from fr5_rl.sim_to_real.fit import FitSettings, fit_driver  # noqa: E402
+from fr5_rl.sim_to_real.fit import load_sim_to_real_settings, fit_driver  # noqa: E402
 from fr5_rl.sim_to_real.replay import replay_error  # noqa: E402
 from fr5_rl.sim_to_real.recording import read_recording  # noqa: E402
 
@@ -72,16 +72,16 @@ def main() -> int:
     if args.bag is None:
         bag.unlink(missing_ok=True)
         rehearsal = record_rehearsal(args.hidden.resolve(), bag.resolve(), args.episodes, args.seed, args.port)
-    settings = load_yaml("sim_to_real")
-    fit_settings = typed(FitSettings, settings["fit"], "config/sim_to_real.yaml: fit")
-    base = load_driver_profile(settings["base_profile"])
+    settings = load_sim_to_real_settings()
+    fit_settings = settings.fit
+    base = load_driver_profile(settings.base_profile)
     recording = read_recording(bag, load_robot_spec().joint_names)
     started = time.time()
-    fit = fit_driver(recording, base, fit_settings, settings["task"], progress=print)
+    fit = fit_driver(recording, base, fit_settings, settings.task, progress=print)
     fit_s = time.time() - started
     fitted_path = args.results / "fitted_profile.yaml"
     write_driver_profile(fit.profile, fitted_path, f"fitted by tools/bench/sim_to_real.py to {bag.name}", force=True)
-    errors = {name: replay_error(recording, profile, settings["task"])
+    errors = {name: replay_error(recording, profile, settings.task)
               for name, profile in (("shipped", base), ("fitted", fit.profile), ("hidden", hidden))}
     for entry in errors.values():
         entry.pop("replay")
@@ -92,7 +92,7 @@ def main() -> int:
 
     subprocess.run([sys.executable, str(REPO / "scripts" / "compare_run.py"), shown(bag), "--out",
                     shown(args.results / "gap"), "--driver-profile", shown(fitted_path), "--baseline-profile",
-                    settings["base_profile"], "--force"], check=True, cwd=REPO)
+                    settings.base_profile, "--force"], check=True, cwd=REPO)
     tau_errors_ms = [1000.0 * (f - h) for f, h in zip(fit.profile.response_time_constant_s,
                                                        hidden.response_time_constant_s)]
     ratio = errors["shipped"]["rms_rad"] / max(errors["fitted"]["rms_rad"], 1e-12)

@@ -33,7 +33,7 @@ the noise of a ROS run, so hundreds of episodes take a minute:
   measured range) after its capture, stamped with its capture time; held where it was last seen
   while the tcp is within ``--hidden-radius`` of it (the hand hides it: the tracker's hold); in
   the tcp frame, without delay, once the object is in the hand
-  (``FR5Env.held_as_the_camera_sees``). The default (``simulator``) is the simulator's own
+  (``Episode.held_as_the_camera_sees``). The default (``simulator``) is the simulator's own
   /target_pose, exact and at once. Rendering, the detector's segmentation and its tracker are
   not emulated;
 - **episodes**: with ``episode_start: go_to_start`` the arm is not teleported: the cup is placed,
@@ -79,12 +79,12 @@ import numpy as np
 from benchlib import AT_LEAST, REPO, RESULTS_DIR, relative_path, update_summary, verdict, write_result
 
 from fr5_rl.chain_emulation import CAMERA_HIDDEN_RADIUS_M, Chain, ChainEmulation, simulator_profile
-from fr5_rl.config import load_robot_spec, load_yaml, package_root
+from fr5_rl.config import load_robot_spec
 from fr5_rl.deploy.deployment import DeploymentStep
-from fr5_rl.motion_guard import load_guard_settings
+from fr5_rl.deploy.policy_node_params import load_policy_node_params
 from fr5_rl.deploy.policy import load_policy
 from fr5_rl.env_config import load_env_config
-from fr5_rl.envs import FR5Env
+from fr5_rl.episode import Episode
 from fr5_rl.training.evaluation import wilson_interval
 from fr5_rl.training.success_map import write_success_map
 
@@ -130,26 +130,26 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     params = simulator_profile(args.profile)
     chain = Chain.of(params, args)
     task = policy.task
-    env = FR5Env(task, config={task: {"simulation": {"physics_dt": float(params["physics_dt"]),
-                                                     "solver_iterations": int(params["solver_iterations"])}}})
-    node_cfg = load_yaml(package_root() / "config" / "policy_node.yaml")
-    guard = dataclasses.replace(load_guard_settings(), go_to_start=True)  # the bench makes the start moves itself
+    sim = Episode.build(task, overrides={task: {"simulation": {"physics_dt": params.physics_dt,
+                                                               "solver_iterations": params.solver_iterations}}})
+    node = load_policy_node_params()
+    guard = dataclasses.replace(node.guard, go_to_start=True)  # the bench makes the start moves itself
     trained = load_env_config(policy.meta.get("env_overrides", {}))
     step = DeploymentStep(policy, robot, trained,
-                          float(node_cfg["joint_state_timeout"]), float(node_cfg["target_timeout"]),
-                          target_workspace_margin=float(node_cfg["target_workspace_margin"]),
-                          future_stamp_tolerance=float(node_cfg["future_stamp_tolerance"]),
+                          node.joint_state_timeout, node.target_timeout,
+                          target_workspace_margin=node.target_workspace_margin,
+                          future_stamp_tolerance=node.future_stamp_tolerance,
                           guard=guard if chain.episode_start == "go_to_start" else None)
-    fresh_state_wait_s = (float(node_cfg["fresh_state_wait"]) if args.fresh_state_wait_ms is None
+    fresh_state_wait_s = (node.fresh_state_wait if args.fresh_state_wait_ms is None
                           else args.fresh_state_wait_ms / 1000.0)
     compute_samples = None
     if args.compute_from is not None:
         compute_samples = json.loads(args.compute_from.read_text())["compute_latency_s"]
-    emulation = ChainEmulation(env, step, chain, params, args.compute_ms / 1000.0, np.random.default_rng(args.seed),
+    emulation = ChainEmulation(sim, step, chain, params, args.compute_ms / 1000.0, np.random.default_rng(args.seed),
                                 trained.observation.joint_velocity_source, args.hidden_radius,
                                 compute_samples, args.state_jitter_ms / 1000.0, fresh_state_wait_s)
     records = [emulation.run_episode(args.seed + index) for index in range(args.episodes)]
-    env.close()
+    sim.close()
     successes = sum(record["success"] for record in records)
     failures: Dict[str, int] = {}
     for record in records:

@@ -74,7 +74,7 @@ def offline(placements: int, noise: float, renderers: List[str], frames: int, pr
 
     def show(camera, seed: int):
         env.reset(seed=seed)
-        states, obj, scene = env.joint_states(), env.object_pose(), env.scene()
+        states, obj, scene = env.episode.joint_states(), env.episode.object_pose(), env.episode.scene()
         camera.set_joints(dict(zip(states.names, states.positions)))
         camera.set_object(scene.object_shape, scene.object_dims, obj.position, obj.quaternion)
         return obj

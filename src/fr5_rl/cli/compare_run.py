@@ -21,10 +21,11 @@ import math
 from pathlib import Path
 from typing import List, Optional
 
-from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec, load_yaml, robot_names
+from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec, robot_names
 from ..deploy.bundle import write_json_atomic
 from ..sim.driver_profile import load_driver_profile, profile_summary
 from ..sim_to_real.compare import joint_table, plot_joints, run_report
+from ..sim_to_real.fit import load_sim_to_real_settings
 from ..sim_to_real.replay import replay_error
 from ..sim_to_real.recording import RecordingError, read_recording
 from . import fail, parser_from_doc, script_args
@@ -55,9 +56,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         report_path = args.out / "report.json"
         if report_path.exists() and not args.force:
             raise FileExistsError(f"{report_path} exists; pass --force to replace it")
-        settings = load_yaml("sim_to_real")
-        task = args.task or settings["task"]
-        profile = load_driver_profile(args.driver_profile or settings["base_profile"])
+        settings = load_sim_to_real_settings()
+        task = args.task or settings.task
+        profile = load_driver_profile(args.driver_profile or settings.base_profile)
         spec = load_robot_spec(args.robot)
         recording = read_recording(args.bag, spec.joint_names, args.joint_states_topic, args.command_topic)
         result = replay_error(recording, profile, task, robot=args.robot)

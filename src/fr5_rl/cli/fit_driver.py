@@ -20,10 +20,10 @@ import math
 from pathlib import Path
 from typing import List, Optional
 
-from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec, load_yaml, robot_names, typed
+from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec, robot_names
 from ..deploy.bundle import write_json_atomic
 from ..sim.driver_profile import load_driver_profile, profile_summary, write_driver_profile
-from ..sim_to_real.fit import FitSettings, fit_driver
+from ..sim_to_real.fit import fit_driver, load_sim_to_real_settings
 from ..sim_to_real.recording import RecordingError, read_recording
 from . import fail, parser_from_doc, script_args
 
@@ -51,19 +51,19 @@ def main(argv: Optional[List[str]] = None) -> int:
     try:
         if args.out.exists() and not args.force:
             raise FileExistsError(f"{args.out} exists; pass --force to replace it")
-        settings = load_yaml("sim_to_real")
-        fit_settings = typed(FitSettings, settings["fit"], "config/sim_to_real.yaml: fit")
+        settings = load_sim_to_real_settings()
+        fit_settings = settings.fit
         if args.servo_rates is not None:
             fit_settings = dataclasses.replace(fit_settings, servo_rates=list(args.servo_rates))
         if fit_settings.loss not in ("mae", "mse"):
             raise ConfigError(f"config/sim_to_real.yaml: fit.loss must be mae or mse, got {fit_settings.loss!r}")
-        base_name = args.base_profile or settings["base_profile"]
+        base_name = args.base_profile or settings.base_profile
         base = load_driver_profile(base_name)
         spec = load_robot_spec(args.robot)
         recording = read_recording(args.bag, spec.joint_names, args.joint_states_topic, args.command_topic)
         print(f"fit_driver.py: {recording.source}: {recording.moving_time():.1f} s of motion; trying servo "
               f"rates, delays and phases behind {base_name}'s physics step ({1000 * base.physics_dt:g} ms)")
-        result = fit_driver(recording, base, fit_settings, args.task or settings["task"],
+        result = fit_driver(recording, base, fit_settings, args.task or settings.task,
                             progress=None if args.quiet else print, robot=args.robot)
         fitted = result.profile
         taus = ", ".join(f"{1000 * tau:.1f}" for tau in fitted.response_time_constant_s)

@@ -28,7 +28,6 @@ import gc
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
@@ -43,13 +42,14 @@ from std_msgs.msg import Bool, Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 from visualization_msgs.msg import Marker
 
-from ..config import ConfigError, check_positive, load_robot_spec
+from ..config import ConfigError, load_robot_spec
 from ..env_config import load_env_config
 from ..deploy.bundle import ModelFilesError, resolve_model_dir
 from ..deploy.deployment import Command, DeploymentStep, Hold, HoldReason, StepInputs
 from ..deploy.joint_state import FreshStateWait, JointStateReader, Reading, velocities_from_positions
-from ..motion_guard import MotionGuardSettings, StartPhase
+from ..motion_guard import StartPhase
 from ..deploy.policy import load_policy
+from ..deploy.policy_node_params import PolicyNodeParams
 from .params import exit_if_help_asked, node_parameters
 from .lifetime import init_node
 
@@ -60,55 +60,6 @@ TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.Ext
 # The fields of each ~timing message, in order (s; "repeated" is 1.0 or 0.0): one place for the
 # node, its diagnostics and the benches that listen to it.
 TIMING_FIELDS = ("loop_period", "inference", "compute_latency", "joint_state_age", "new_state_wait", "repeated")
-
-
-@dataclass(frozen=True)
-class PolicyNodeParams:
-    """``config/policy_node.yaml``: the policy node's ~private parameters."""
-
-    model_dir: str
-    caller_dir: str  # where a relative model_dir was typed (roslaunch's directory); "": the current one
-    robot: str  # "": the model's arm
-    backend: str
-    rate: float
-    base_frame: str
-    joint_state_timeout: float
-    target_timeout: float
-    future_stamp_tolerance: float
-    target_workspace_margin: float
-    joint_states_topic: str
-    finger_joint_states_topic: str
-    joint_velocity_source: str
-    gripper_fault_topic: str
-    target_topic: str
-    command_topic: str
-    gripper_command_topic: str
-    command_gripper: bool
-    dry_run: bool
-    dry_run_topic: str
-    enabled: bool
-    sim_time_input_wait: float
-    fresh_state_wait: float
-    startup_grace: float
-    start_move_timeout: float
-    motion_guard: bool
-    guard: MotionGuardSettings
-
-    def check(self, source: str) -> None:
-        if self.joint_velocity_source not in ("driver", "positions"):
-            raise ConfigError(f"{source}: 'joint_velocity_source' must be driver or positions, "
-                              f"got {self.joint_velocity_source!r}")
-        if self.startup_grace < 0:
-            raise ConfigError(f"{source}: 'startup_grace' must be >= 0 s, got {self.startup_grace}")
-        if self.sim_time_input_wait < 0:
-            raise ConfigError(f"{source}: 'sim_time_input_wait' must be >= 0 s, got {self.sim_time_input_wait}")
-        if not 0.0 <= self.fresh_state_wait < 1.0 / self.rate:
-            raise ConfigError(f"{source}: 'fresh_state_wait' must be >= 0 s and shorter than a control period "
-                              f"({1.0 / self.rate:g} s), got {self.fresh_state_wait}")
-        if self.backend not in ("torch", "onnx"):
-            raise ConfigError(f"{source}: 'backend' must be torch or onnx, got {self.backend!r}")
-        check_positive(source, rate=self.rate, joint_state_timeout=self.joint_state_timeout,
-                       target_timeout=self.target_timeout, start_move_timeout=self.start_move_timeout)
 
 
 class PolicyNode:

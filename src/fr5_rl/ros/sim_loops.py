@@ -12,7 +12,8 @@ import rospy
 from rosgraph_msgs.msg import Clock
 
 from ..config import whole_multiple
-from ..envs import EpisodeVerdict
+from ..episode_runner import Phase
+from ..tasks import EpisodeVerdict
 from ..sim.pacing import AlignedStepSchedule, StepSchedule, TimeSchedule, WallClockPacer
 from .sim_messages import scene_markers
 
@@ -33,44 +34,35 @@ class RealTimeLoop:
         in simulation as it did in reality. Every ``control_dt`` of simulated time after the
         first command, the environment judges the episode."""
         node = self.node
-        params, env = node.params, node.env
+        params, sim, runner = node.params, node.sim, node.runner
         rate = rospy.Rate(1.0 / node.physics_dt)
         pacer = WallClockPacer(node.physics_dt, max_catch_up=10 * node.steps_per_publish)
         ros_minus_monotonic = rospy.Time.now().to_sec() - time.monotonic()
-        judge = StepSchedule(whole_multiple(env.control_dt, node.physics_dt) or 1)
+        judge = StepSchedule(whole_multiple(sim.control_dt, node.physics_dt) or 1)
         publish = AlignedStepSchedule(node.steps_per_publish)
         camera, markers = TimeSchedule(1.0 / params.camera_rate), TimeSchedule(1.0 / params.marker_rate)
         while not rospy.is_shutdown():
             with node.lock:
-                if node.holding and time.monotonic() >= node.hold_until:
-                    if node.settling:
+                if runner.hold_is_over():
+                    if runner.phase is Phase.SETTLING:
                         node.begin_episode()
-                    elif 0 < params.episodes <= node.episode:
+                    elif 0 < params.episodes <= runner.episode:
                         break
                     else:
                         node.start_episode(settle=params.reset_settle_time)
                 if node.controller is not None:
                     node.take_controller_command()
                 self._end_if_never_commanded(pacer.sim_time)
-                if not node.holding:
-                    node.loop_lateness.append(pacer.lateness())
+                if not runner.holding:
+                    runner.loop_lateness.append(pacer.lateness())
                 for step in pacer.due_steps():
-                    step_start = pacer.wall_time - node.physics_dt
-                    arm_command = node.arriving.due(step_start)
-                    if arm_command is not None:
-                        node.arm_command = arm_command
-                    gripper_target = node.gripper_arriving.due(step_start)
-                    if gripper_target is not None:
-                        node.gripper_target = gripper_target
-                    env.advance_physics(node.response.targets_for_step(node.servo.targets_for_step(node.arm_command)),
-                                        node.gripper_target)
-                    if not node.commanded:
+                    runner.physics_step(pacer.wall_time - node.physics_dt)
+                    if not runner.commanded:
                         judge.restart(step)  # episodes are timed from the first command
-                    elif not node.holding and not node.calibrating and judge.due(step):
-                        verdict = env.judge_period()
+                    elif runner.judged and judge.due(step):
+                        verdict = runner.judge()
                         if verdict.ended:
                             node.finish_episode(verdict, pacer.sim_time)
-                        node.tcp_path.append(tuple(env.tcp_position()))
                 if node.controller is not None:
                     node.report_to_controller()
                 if publish.due(pacer.step):
@@ -81,7 +73,7 @@ class RealTimeLoop:
                     if node.target_pub is not None and camera.due(pacer.sim_time):
                         node.target_pub.publish(node.camera_message(stamp))
                     if markers.due(pacer.sim_time):
-                        node.marker_pub.publish(scene_markers(env.scene(), env.object_pose(), node.tcp_path, stamp))
+                        node.marker_pub.publish(scene_markers(sim.scene(), sim.object_pose(), runner.tcp_path, stamp))
             try:
                 rate.sleep()
             except rospy.ROSInterruptException:
@@ -92,8 +84,8 @@ class RealTimeLoop:
         a target it refuses, a fault) ends after ``~first_command_timeout`` as failure
         ``"no_command"``, so a run always finishes; its hold message says why."""
         node = self.node
-        waiting = (node.params.first_command_timeout > 0.0 and not node.holding and not node.positioning
-                   and not node.commanded and node.command_sub.get_num_connections() > 0)
+        waiting = (node.params.first_command_timeout > 0.0 and node.runner.phase is Phase.WAITING
+                   and node.command_sub.get_num_connections() > 0)
         if not waiting:
             self.uncommanded_since = None
             return
@@ -121,8 +113,8 @@ class LockstepLoop:
         period as gym's ``step`` does; judge. Before an episode's first command the world waits
         (time passes, physics does not), as a gym episode starts with its first action."""
         node = self.node
-        params, env = node.params, node.env
-        period_ns = int(round(env.control_dt * 1e9))  # integer time: 0.02 s steps stay exact
+        params, sim, runner = node.params, node.sim, node.runner
+        period_ns = int(round(sim.control_dt * 1e9))  # integer time: 0.02 s steps stay exact
         marker_period_ns = int(round(1e9 / params.marker_rate))
         now_ns, next_marker_ns = 1_000_000_000, 0  # start at 1 s: time 0 means "no clock yet" to many nodes
         node.clock_pub.publish(Clock(clock=rospy.Time(0, now_ns)))
@@ -135,28 +127,27 @@ class LockstepLoop:
             with node.lock:
                 if now_ns >= next_marker_ns:
                     next_marker_ns = now_ns + marker_period_ns
-                    node.marker_pub.publish(scene_markers(env.scene(), env.object_pose(), node.tcp_path,
+                    node.marker_pub.publish(scene_markers(sim.scene(), sim.object_pose(), runner.tcp_path,
                                                           rospy.Time(0, now_ns)))
                 self._open_period(now_ns)
                 arrived = node.command_arrived.wait_for(self._period_commanded,
                                                         timeout=params.lockstep_command_timeout)
-                if node.commanded:
+                if runner.judged:
                     if not arrived:
-                        node.late_periods += 1
-                    env.advance_period(node.arm_command, node.gripper_target)
+                        runner.late_periods += 1
+                    runner.control_period()
                     periods += 1
-                    verdict = env.judge_period()
-                    node.tcp_path.append(tuple(env.tcp_position()))
+                    verdict = runner.judge()
                     if verdict.ended:
                         node.finish_episode(verdict, (now_ns + period_ns) * 1e-9)
-                        if 0 < params.episodes <= node.episode:
+                        if 0 < params.episodes <= runner.episode:
                             break
                         node.start_episode()
             now_ns += period_ns
         wall = time.monotonic() - wall_start
         if periods:
-            print(f"lockstep: {periods * env.control_dt:.1f} s simulated in {wall:.1f} s of wall time "
-                  f"({periods * env.control_dt / max(wall, 1e-9):.1f}x real time)", flush=True)
+            print(f"lockstep: {periods * sim.control_dt:.1f} s simulated in {wall:.1f} s of wall time "
+                  f"({periods * sim.control_dt / max(wall, 1e-9):.1f}x real time)", flush=True)
 
     def _warm_up(self, now_ns: int, period_ns: int) -> int:
         """Run periods without physics until one command arrives within its period: every
@@ -168,7 +159,7 @@ class LockstepLoop:
         node = self.node
         with node.lock:
             node.start_episode()
-            node.holding = True  # commands are counted, not obeyed
+            node.runner.hold()  # commands are counted, not obeyed
         arrived = False
         while not arrived and not rospy.is_shutdown():
             with node.lock:

@@ -8,7 +8,7 @@ from geometry_msgs.msg import Point
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..envs import JointStates, Pose, SceneDescription
+from ..sim.plant import JointStates, Pose, SceneDescription
 
 
 def joint_state_message(states: JointStates, stamp: rospy.Time) -> JointState:

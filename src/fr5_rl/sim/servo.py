@@ -11,6 +11,8 @@ import math
 from collections import deque
 from typing import Deque, List, Optional, Sequence, Tuple
 
+from ..config import ConfigError, whole_multiple
+
 
 class ServoCycle:
     """Latches commands on a fixed cycle and releases them ``delay_cycles`` cycles later.
@@ -103,3 +105,39 @@ class FirstOrderResponse:
         self.applied = [held + fraction * (float(target) - held)
                         for held, target, fraction in zip(self.applied, targets, self._fractions)]
         return tuple(self.applied)
+
+
+class DriverModel:
+    """The arm's driver as every real-time stand-in runs it (the simulator node, the chain
+    emulation, the replay of a recording): commands latched on the servo cycle
+    (:class:`ServoCycle`), then followed with the response lag (:class:`FirstOrderResponse`).
+
+    :param servo_rate: Hz of the driver's servo loop (0: no cycle, a command acts from the next
+        physics step).
+    :param servo_delay_cycles: whole cycles between latching a command and its effect.
+    :param response_time_constants: s per joint (empty or zeros: no lag).
+    :param physics_dt: s per physics step; 1 / ``servo_rate`` must be a whole multiple of it.
+    :param initial: rad, the targets held before any command.
+    :raises ConfigError: the servo period is not a whole number of physics steps.
+    """
+
+    def __init__(self, servo_rate: float, servo_delay_cycles: int, response_time_constants: Sequence[float],
+                 physics_dt: float, initial: Sequence[float]) -> None:
+        steps_per_cycle = 0
+        if servo_rate > 0:
+            steps_per_cycle = whole_multiple(1.0 / servo_rate, physics_dt)
+            if steps_per_cycle is None:
+                raise ConfigError(f"1 / servo_rate ({1.0 / servo_rate:g} s) must be a whole multiple of "
+                                  f"physics_dt ({physics_dt:g} s)")
+        self.servo = ServoCycle(steps_per_cycle, servo_delay_cycles, initial)
+        self.response = FirstOrderResponse(response_time_constants, physics_dt, initial)
+
+    def reset(self, positions: Sequence[float], restart_cycle: bool = True, phase_steps: int = 0) -> None:
+        """The arm stands at ``positions`` (rad), nothing in flight (see :meth:`ServoCycle.reset`)."""
+        self.servo.reset(positions, restart_cycle=restart_cycle, phase_steps=phase_steps)
+        self.response.reset(positions)
+
+    def targets_for_step(self, newest_command: Optional[Sequence[float]]) -> Tuple[float, ...]:
+        """The joint targets (rad) for the next physics step, given the newest command received
+        (None: none yet)."""
+        return self.response.targets_for_step(self.servo.targets_for_step(newest_command))

@@ -16,7 +16,7 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from ..config import DEFAULT_ROBOT, whole_multiple
+from ..config import DEFAULT_ROBOT, load_yaml, typed, whole_multiple
 from ..sim.driver_profile import DriverProfile
 from .recording import RecordingError, RunRecording
 from .replay import Replay, Replayer, summary, tracking_errors
@@ -47,6 +47,26 @@ class FitSettings:
     loss: str = "mae"
     min_moving_s: float = 10.0
     max_replay_s: float = 60.0
+
+
+@dataclass(frozen=True)
+class SimToRealSettings:
+    """``config/sim_to_real.yaml``: what a comparison and a fit run against.
+
+    :param base_profile: the driver profile a recording is compared with and a fit starts from
+        (``config/<base_profile>.yaml``).
+    :param task: the environment whose scene the replayed arm moves in (reach | grasp).
+    :param fit: the fit's search (:class:`FitSettings`).
+    """
+
+    base_profile: str
+    task: str
+    fit: FitSettings
+
+
+def load_sim_to_real_settings() -> SimToRealSettings:
+    """``config/sim_to_real.yaml``, typed (unknown or missing keys are refused)."""
+    return typed(SimToRealSettings, load_yaml("sim_to_real"), "config/sim_to_real.yaml")
 
 
 @dataclass

@@ -2,7 +2,7 @@
 
 The simulated arm starts where the recorded one was, gets every recorded command at the time it
 was received, through the profile's servo cycle and response exactly as the simulator node
-passes them on (:class:`~fr5_rl.sim.servo.ServoCycle`, :class:`~fr5_rl.sim.servo.FirstOrderResponse`),
+passes them on (:class:`~fr5_rl.sim.servo.DriverModel`: the servo cycle, then the response),
 and its joint positions are taken at the recorded joint states' stamps. Where the recorded arm
 jumps (the simulator's teleporting reset between episodes; a real arm never does), the replay
 starts again from the recorded state.
@@ -14,10 +14,11 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..config import DEFAULT_ROBOT, load_yaml, whole_multiple
-from ..envs import FR5Env
+from ..config import DEFAULT_ROBOT, whole_multiple
+from ..episode import Episode
 from ..sim.driver_profile import DriverProfile
-from ..sim.servo import FirstOrderResponse, ServoCycle
+from ..sim.node_params import load_sim_node_params
+from ..sim.servo import DriverModel
 from .recording import RunRecording
 
 
@@ -92,14 +93,14 @@ class Replayer:
     """
 
     def __init__(self, task: str, physics_dt: float, robot: str = DEFAULT_ROBOT) -> None:
-        settings = load_yaml("sim_node")
+        solver_iterations = load_sim_node_params().solver_iterations
         self.physics_dt = float(physics_dt)
-        self.env = FR5Env(task=task, robot=robot, config={task: {"simulation": {
-            "physics_dt": self.physics_dt, "solver_iterations": int(settings["solver_iterations"])}}})
-        self.spec = self.env.robot_spec
+        self.sim = Episode.build(task, robot, {task: {"simulation": {
+            "physics_dt": self.physics_dt, "solver_iterations": solver_iterations}}})
+        self.spec = self.sim.robot_spec
 
     def close(self) -> None:
-        self.env.close()
+        self.sim.close()
 
     def run(self, recording: RunRecording, profile: DriverProfile, phase_steps: int = 0,
             response: Optional[Sequence[float]] = None) -> Replay:
@@ -113,7 +114,6 @@ class Replayer:
         if abs(profile.physics_dt - self.physics_dt) > 1e-12:
             raise ValueError(f"the profile's physics_dt {profile.physics_dt} s is not the replayer's {self.physics_dt} s")
         dt = self.physics_dt
-        steps_per_cycle = whole_multiple(profile.servo_period, dt) if profile.servo_rate > 0 else 0
         taus = list(profile.response_time_constant_s if response is None else response) or [0.0] * 6
         out = np.zeros_like(recording.positions)
         segments = replay_segments(recording, self.spec.velocity_limits)
@@ -121,10 +121,9 @@ class Replayer:
         for start, end in segments:
             t0 = recording.state_times[start]
             first = recording.positions[start]
-            self.env.reset(seed=0, options={"arm_positions": first.tolist()})
-            servo = ServoCycle(steps_per_cycle or 0, profile.servo_delay_cycles, first)
-            servo.reset(first, phase_steps=phase_steps)
-            lag = FirstOrderResponse(taus, dt, first)
+            self.sim.start(0, options={"arm_positions": first.tolist()})
+            driver = DriverModel(profile.servo_rate, profile.servo_delay_cycles, taus, dt, first)
+            driver.reset(first, phase_steps=phase_steps)
             sample_steps = np.rint((recording.state_times[start:end] - t0) / dt).astype(int)
             # Commands received before the segment's first step stand (the newest of them).
             pointer = int(np.searchsorted(command_times, t0, side="right"))
@@ -144,10 +143,10 @@ class Replayer:
                        and recording.gripper_times[gripper_pointer] <= now):
                     width = float(recording.gripper_widths[gripper_pointer])
                     gripper_pointer += 1
-                self.env.advance_physics(lag.targets_for_step(servo.targets_for_step(newest)), width)
+                self.sim.advance_physics(driver.targets_for_step(newest), width)
                 done = step + 1
                 while sample_index < len(sample_steps) and sample_steps[sample_index] <= done:
-                    out[start + sample_index] = self.env.joint_positions()
+                    out[start + sample_index] = self.sim.joint_positions()
                     sample_index += 1
         return Replay(out, segments)
 

@@ -1,6 +1,15 @@
-"""Tasks: what the FR5 must do, how it is judged and rewarded. One task per module."""
-from .base import Task, TaskState, TaskOutcome
-from .reach import ReachTask
-from .grasp import GraspTask
+"""Tasks: what the arm must do, how it is judged and rewarded. One task per module: every module
+here is imported, and each :class:`Task` subclass registers itself in :data:`TASKS` by name."""
+import importlib
+import pkgutil
 
-__all__ = ["Task", "TaskState", "TaskOutcome", "ReachTask", "GraspTask"]
+from .base import TASKS, EpisodeVerdict, Task, TaskOutcome, TaskState, held_as_the_camera_sees, task_state_from
+
+for _module in pkgutil.iter_modules(__path__):
+    importlib.import_module(f"{__name__}.{_module.name}")
+
+from .grasp import GraspTask  # noqa: E402  (imported above; named for callers)
+from .reach import ReachTask  # noqa: E402
+
+__all__ = ["TASKS", "EpisodeVerdict", "Task", "TaskOutcome", "TaskState", "held_as_the_camera_sees",
+           "task_state_from", "ReachTask", "GraspTask"]

@@ -4,9 +4,10 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Dict, Mapping, Optional, Sequence
+from typing import Dict, Mapping, NamedTuple, Optional, Sequence, Tuple, Type
 
-from ..env_config import EnvConfig
+from ..env_config import EnvConfig, RandomisationConfig
+from ..transforms import quaternion_z_axis
 
 
 @dataclass
@@ -41,19 +42,104 @@ class TaskOutcome:
     terms: Dict[str, float] = field(default_factory=dict)  # shaping terms, unweighted
 
 
+class EpisodeVerdict(NamedTuple):
+    """How one control period left the episode (:meth:`fr5_rl.episode.Episode.judge_period`).
+
+    :param success: the task's success test passed this period.
+    :param failure: why the episode failed (the task's reason, e.g. ``"collision"``, or
+        ``"timeout"`` when the step limit ended it), else None.
+    :param terminated: the episode ended by success or a task failure (gymnasium's
+        ``terminated``).
+    :param truncated: the step limit ended it first (gymnasium's ``truncated``; ``failure``
+        is then ``"timeout"``).
+    :param steps: control periods judged since the reset, this one included.
+    :param outcome: the task's own verdict, with the unweighted shaping terms the reward
+        is made of (its ``failure`` never says ``"timeout"``).
+    """
+
+    success: bool
+    failure: Optional[str]
+    terminated: bool
+    truncated: bool
+    steps: int
+    outcome: TaskOutcome
+
+    @property
+    def ended(self) -> bool:
+        """The episode is over (``terminated or truncated``)."""
+        return self.terminated or self.truncated
+
+    @property
+    def terms(self) -> Dict[str, float]:
+        """The task's unweighted shaping terms of this period, by name."""
+        return self.outcome.terms
+
+
+def task_state_from(measured, object_pose, contacts, object_start: Sequence[float],
+                    workspace: Tuple[Sequence[float], Sequence[float]]) -> TaskState:
+    """The state a task judges, from the plant's reads of one moment.
+
+    :param measured: the arm (:class:`fr5_rl.sim.plant.Measurement`).
+    :param object_pose: the object (:class:`fr5_rl.sim.plant.Pose`, base_link).
+    :param contacts: what the robot touches (:class:`fr5_rl.sim.plant.Contacts`).
+    :param object_start: where the object was placed (m, base_link).
+    :param workspace: the tcp's allowed box (low, high), m, base_link.
+    """
+    q, qd, width, tcp_position, tcp_quaternion = measured
+    object_position, object_quaternion = object_pose[0], object_pose[1]
+    x, y, z = tcp_position
+    (x_low, y_low, z_low), (x_high, y_high, z_high) = workspace
+    return TaskState(
+        joint_positions=q, joint_velocities=qd, tcp_position=tcp_position,
+        tcp_approach_axis=quaternion_z_axis(tcp_quaternion), gripper_width=width,
+        tcp_to_object_distance=math.dist(object_position, tcp_position),
+        object_position=object_position, object_up_axis=quaternion_z_axis(object_quaternion),
+        object_start_position=object_start, robot_table_contact=contacts.table,
+        arm_object_contact=contacts.arm_object, fingers_object_contact=contacts.finger_pads,
+        tcp_in_workspace=x_low <= x <= x_high and y_low <= y <= y_high and z_low <= z <= z_high,
+    )
+
+
+def held_as_the_camera_sees(state: TaskState, object_width: float, object_rest_z: float,
+                            rnd: RandomisationConfig) -> bool:
+    """The object is in the hand as the detector's tracker decides it (then it is published in
+    the tcp frame, without the camera's delay): the fingers closed to about the object's width,
+    the tcp near its centre, the object lifted off its resting height
+    (``randomisation.target_in_hand_*``, the tracker's thresholds).
+
+    :param object_width: m across the object where the fingers close on it.
+    :param object_rest_z: z (m, base_link) of its centre standing on the table.
+    """
+    return (state.gripper_width <= object_width + rnd.target_in_hand_width_margin
+            and state.tcp_to_object_distance <= rnd.target_in_hand_radius
+            and state.object_position[2] > object_rest_z + rnd.target_in_hand_lift)
+
+
 def approach_angle(tcp_approach_axis: Sequence[float]) -> float:
     """Angle (rad) between the tcp z axis (approach direction, unit vector) and straight down (-z)."""
     return math.acos(min(max(-float(tcp_approach_axis[2]), -1.0), 1.0))
 
 
-class Task:
-    """Base class: placement sampling, shaping terms, success and failure tests.
+TASKS: Dict[str, Type["Task"]] = {}  # every task by its name, filled as each module defines its class
 
-    Subclasses implement :meth:`terms`, :meth:`judge` and may extend :meth:`reset`.
+
+class Task:
+    """Base class: shaping terms, success and failure tests.
+
+    A new task is one module of :mod:`fr5_rl.tasks`: a subclass with its own ``name`` (it
+    registers itself in :data:`TASKS`; the package imports every module) that implements
+    :meth:`terms`, :meth:`judge` and may extend :meth:`reset`. Its settings are
+    ``config/env.yaml``'s section of that name.
     """
 
     name = "task"
     include_lift = False
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        if cls.name in TASKS and TASKS[cls.name] is not cls:
+            raise TypeError(f"two tasks are named {cls.name!r}: {TASKS[cls.name].__name__} and {cls.__name__}")
+        TASKS[cls.name] = cls
 
     def __init__(self, cfg: EnvConfig, max_opening_width: float) -> None:
         self.max_steps = cfg.task(self.name).max_steps

@@ -26,11 +26,12 @@ class GraspTask(Task):
         self.lift_height = grasp.lift_height
         self.hold_time = grasp.hold_time
         self.max_tilt_cos = float(np.cos(np.deg2rad(grasp.knocked_over_angle_deg)))
-        # Pushed more than 10 cm beyond the placement region: out of reach.
-        self.region_low = [v - 0.1 for v in cfg.object.region_low]
-        self.region_high = [v + 0.1 for v in cfg.object.region_high]
+        # Pushed beyond the placement region by more than the margin: out of reach.
+        margin = grasp.out_of_reach_margin
+        self.region_low = [v - margin for v in cfg.object.region_low]
+        self.region_high = [v + margin for v in cfg.object.region_high]
         # Close when the tcp is this close to the grasp point (m): the shaping's cue.
-        self.close_distance = 0.02
+        self.close_distance = grasp.close_distance
         self.grasp_point_height = grasp.grasp_point_height
         self.lifted_time = 0.0
 

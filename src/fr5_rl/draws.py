@@ -1,0 +1,172 @@
+"""Every per-episode random draw, in one function and one fixed order.
+
+:func:`draw_episode` makes all of an episode's draws from the environment's generator before
+anything is built from them: the object (size, mass, friction, place, yaw), the arm (damping,
+start), the physics step, and the control chain's delays (latency, in-period timing, the
+driver's response, the bridged gripper's phases, the camera's timing, the motion guard). The
+order is the environment's contract with every seed: a draw made only when its feature is
+configured keeps the episodes of configurations without it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional, Sequence, Tuple
+
+import numpy as np
+
+from .config import RobotSpec
+from .env_config import EnvConfig
+
+
+@dataclass(frozen=True)
+class TargetTiming:
+    """The camera's timing of one episode (:class:`~fr5_rl.observation.DelayedTarget`).
+
+    :param latency: s from the moment a frame shows to its pose arriving.
+    :param frame_period: s between frames.
+    :param phase: s of the first frame after the reset.
+    """
+
+    latency: float
+    frame_period: float
+    phase: float
+
+
+@dataclass(frozen=True)
+class EpisodeDraws:
+    """One episode's draws (see :func:`draw_episode`); units SI, positions in base_link.
+
+    :param perturbed: the randomisation applies this episode (not a plain one).
+    :param object_dims: (radius, height) of a cylinder or (half_extent,) of a cube (m).
+    :param object_size_scale: the factor the configured size was scaled by.
+    :param object_mass: kg. :param object_friction: lateral friction coefficient.
+    :param object_xy: where the object stands (m). :param object_yaw: its yaw (rad).
+    :param start_joint_positions: the arm's start (rad, j1 .. j6), before clipping to the limits.
+    :param joint_damping: N*m*s/rad on every arm joint.
+    :param physics_dt: s per physics step.
+    :param action_latency_steps: whole control periods the arm's command lags.
+    :param gripper_latency_steps: the gripper's own lag (periods); None: the arm's.
+    :param observation_noise_std: std of the noise on joints (rad) and object position (m).
+    :param command_delay_s: (low, high) s the previous command stands into each period.
+    :param observation_age_s: (low, high) s before the period's end the joint state is measured.
+    :param response_time_constants: the driver's lag per joint (s), or None: none this episode.
+    :param bridge_phases: the bridged gripper's (call, read, zero-debounce) phases (s), or None:
+        the gripper is driven directly this episode.
+    :param target: the camera's timing, or None: the object is seen as it is.
+    :param guard: the policy node's motion guard limits this episode's commands.
+    """
+
+    perturbed: bool
+    object_dims: Tuple[float, ...]
+    object_size_scale: float
+    object_mass: float
+    object_friction: float
+    object_xy: Tuple[float, float]
+    object_yaw: float
+    start_joint_positions: Tuple[float, ...]
+    joint_damping: float
+    physics_dt: float
+    action_latency_steps: int
+    gripper_latency_steps: Optional[int]
+    observation_noise_std: float
+    command_delay_s: Tuple[float, float]
+    observation_age_s: Tuple[float, float]
+    response_time_constants: Optional[Tuple[float, ...]]
+    bridge_phases: Optional[Tuple[float, float, float]]
+    target: Optional[TargetTiming]
+    guard: bool
+
+    @property
+    def in_period_timing(self) -> bool:
+        """The period has inner timing: a delayed command, an early measurement or a response."""
+        return self.command_delay_s[1] > 0.0 or self.observation_age_s[1] > 0.0 or self.response_time_constants is not None
+
+
+def draw_episode(rng: np.random.Generator, cfg: EnvConfig, robot: RobotSpec, task: str, physics_dt: float,
+                 bridge_periods: Optional[Tuple[float, float, float]], guard_available: bool,
+                 object_xy: Optional[Sequence[float]] = None) -> EpisodeDraws:
+    """Every random draw of one episode, in the environment's fixed order.
+
+    :param rng: the environment's generator (gymnasium's ``np_random``).
+    :param cfg: the configuration (``object``, ``randomisation``, the task's start noise).
+    :param robot: the arm (home pose).
+    :param task: the task's name (its ``start_joint_noise``).
+    :param physics_dt: the task's configured physics step (s), kept unless drawn.
+    :param bridge_periods: the bridged gripper's (call period, read period, zero debounce) in s,
+        or None where the configuration puts no gripper behind the bridge.
+    :param guard_available: the configuration runs the motion guard in some episodes.
+    :param object_xy: the object's place (m, base_link) given by the caller; None: drawn.
+    """
+    obj, rnd = cfg.object, cfg.randomisation
+    on = rnd.enabled
+    if on and rnd.plain_episode_share > 0.0:  # drawn only when asked for: other configurations keep their episodes
+        on = bool(rng.uniform() >= rnd.plain_episode_share)
+    size = rng.uniform(*rnd.object_size_scale) if on else 1.0
+    mass = obj.mass * (rng.uniform(*rnd.object_mass_scale) if on else 1.0)
+    friction = obj.lateral_friction * (rng.uniform(*rnd.friction_scale) if on else 1.0)
+    dims = (obj.radius * size, obj.height * size) if obj.shape == "cylinder" else (obj.half_extent * size,)
+    damping = rng.uniform(*rnd.joint_damping) if on else 0.0
+    # The simulated position controller tracks differently at other physics steps: drawing the
+    # step per episode keeps a policy from relying on one simulator's exact response.
+    choices = rnd.physics_dt_choices
+    drawn_physics_dt = float(rng.choice(choices)) if on and choices else physics_dt
+    lo, hi = rnd.action_latency_steps
+    latency = int(rng.integers(lo, hi + 1)) if on else 0
+    # Without timing_share, every perturbed episode has the in-period timing and every plain one
+    # none: a policy then reads "no jitter" as "no latency" and rushes into whole-step latency alone.
+    timing = on
+    if on and rnd.timing_share < 1.0:
+        timing = bool(rng.uniform() < rnd.timing_share)
+    response = None
+    if timing and any(tau > 0.0 for tau in rnd.response_time_constant_s):
+        response = tuple(rnd.response_time_constant_s)
+    bridge = None
+    if on and bridge_periods is not None and rng.uniform() < rnd.gripper_bridge_share:
+        call_period, read_period, zero_debounce = bridge_periods
+        bridge = (float(rng.uniform(0.0, call_period)), float(rng.uniform(0.0, read_period)),
+                  float(rng.uniform(0.0, zero_debounce)))
+    target = None
+    if on and rnd.target_share > 0.0 and rng.uniform() < rnd.target_share:
+        frame_period = 1.0 / rnd.target_rate_hz
+        target = TargetTiming(float(rng.uniform(*rnd.target_latency_s)), frame_period,
+                              float(rng.uniform(0.0, frame_period)))
+        if rnd.target_action_latency_steps is not None:  # drawn only when set
+            lo, hi = rnd.target_action_latency_steps
+            latency = int(rng.integers(lo, hi + 1))
+    gripper_latency = None
+    if on and rnd.gripper_latency_steps is not None:  # drawn only when set
+        lo, hi = rnd.gripper_latency_steps
+        gripper_latency = int(rng.integers(lo, hi + 1))
+    # The policy node's motion guard runs on every chain, plain episodes too.
+    guard = bool(guard_available and rng.uniform() < rnd.guard_share)
+
+    # The place: drawn after the chain's draws (the order every seed was made with).
+    if object_xy is not None:
+        xy = np.asarray(object_xy, dtype=float)
+    else:
+        xy = rng.uniform(np.asarray(obj.region_low), np.asarray(obj.region_high))
+        # Drawn only when on, so that with the focus off a seed places the same object as before.
+        if rnd.enabled and rnd.placement_focus_share > 0.0 and rng.uniform() < rnd.placement_focus_share:
+            xy = rng.uniform(np.asarray(rnd.placement_focus_low), np.asarray(rnd.placement_focus_high))
+    yaw = float(rng.uniform(-np.pi, np.pi))
+    noise = cfg.task(task).start_joint_noise
+    start = robot.home_joint_positions + rng.uniform(-noise, noise, 6)
+    return EpisodeDraws(
+        perturbed=on, object_dims=dims, object_size_scale=size, object_mass=mass, object_friction=friction,
+        object_xy=(float(xy[0]), float(xy[1])), object_yaw=yaw, start_joint_positions=tuple(start.tolist()),
+        joint_damping=damping, physics_dt=drawn_physics_dt, action_latency_steps=latency,
+        gripper_latency_steps=gripper_latency, observation_noise_std=rnd.observation_noise_std if on else 0.0,
+        command_delay_s=tuple(rnd.command_delay_s) if timing else (0.0, 0.0),
+        observation_age_s=tuple(rnd.observation_age_s) if timing else (0.0, 0.0),
+        response_time_constants=response, bridge_phases=bridge, target=target, guard=guard,
+    )
+
+
+def draw_place(rng: np.random.Generator, cfg: EnvConfig) -> Tuple[Tuple[float, float], float]:
+    """Another place and yaw for the object, uniform over ``object.region_*`` (a redraw where
+    the first place lies too close to an arm that stays where it stands).
+
+    :return: (x, y) in m, base_link, and the yaw in rad.
+    """
+    xy = rng.uniform(np.asarray(cfg.object.region_low), np.asarray(cfg.object.region_high))
+    return (float(xy[0]), float(xy[1])), float(rng.uniform(-np.pi, np.pi))
