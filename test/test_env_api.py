@@ -15,7 +15,8 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from fr5_rl.envs import EpisodeVerdict, FR5Env
+from fr5_rl.envs import FR5Env
+from fr5_rl.tasks import EpisodeVerdict
 from fr5_rl.expert import ScriptedExpert
 
 REPO = Path(__file__).resolve().parent.parent
@@ -145,13 +146,13 @@ def test_step_times_out_with_the_same_verdict():
 
 def record_arm_commands(env: FR5Env) -> list:
     """Every (arm targets, opening width) the environment sends to the robot."""
-    robot, original, commands = env.plant.robot, env.plant.robot.command, []
+    plant, original, commands = env.plant, env.plant.command, []
 
     def command(joint_targets, opening_width, period=None):
         commands.append((list(joint_targets), opening_width))
         original(joint_targets, opening_width, period)
 
-    robot.command = command
+    plant.command = command
     return commands
 
 
@@ -411,8 +412,8 @@ def test_observation_age_observes_an_earlier_joint_state():
         for env in (aged, fresh):
             env.reset(seed=2)
         measured = []
-        original = aged.plant.robot.measure
-        aged.plant.robot.measure = lambda: measured.append(original()) or measured[-1]
+        original = aged.plant.measure
+        aged.plant.measure = lambda: measured.append(original()) or measured[-1]
         obs_aged = aged.step(action)[0]
         obs_fresh = fresh.step(action)[0]
         np.testing.assert_array_equal(aged.joint_positions(), fresh.joint_positions())  # same physics

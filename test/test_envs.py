@@ -75,15 +75,15 @@ def measured_arm_positions(env: FR5Env) -> np.ndarray:
 
 def record_commands(env: FR5Env) -> list:
     """Intercept every arm command: (targets, arm position PyBullet reports at that moment)."""
-    robot = env.plant.robot
-    original = robot.command
+    plant = env.plant
+    original = plant.command
     records = []
 
     def command(joint_targets, opening_width, period=None):
         records.append((np.array(joint_targets, dtype=np.float64), measured_arm_positions(env)))
         original(joint_targets, opening_width, period=period)
 
-    robot.command = command
+    plant.command = command
     return records
 
 

@@ -104,6 +104,9 @@ class ControlChain:
         self._guard_on = False
         self._target: Optional[DelayedTarget] = None
         self._velocity_sample: Optional[Tuple[Sequence[float], float, List[float]]] = None
+        # This episode sees the object through the camera's timing (sense then asks whether it is held).
+        self.sees_through_camera = False
+        self._substeps, self._physics_dt = 1, 0.0  # the episode's plant: physics steps per period, s each
 
     @property
     def bridge_periods(self) -> Optional[Tuple[float, float, float]]:
@@ -139,10 +142,11 @@ class ControlChain:
         """Some episodes run the motion guard (``randomisation.guard_share`` > 0)."""
         return self._guard is not None
 
-    def begin(self, draws: EpisodeDraws, start: Sequence[float], physics_dt: float) -> None:
+    def begin(self, draws: EpisodeDraws, start: Sequence[float], physics_dt: float, substeps: int) -> None:
         """A new episode: this episode's chain as drawn, the arm standing at ``start`` (rad).
 
         :param physics_dt: the episode's physics step (s), the response's unit.
+        :param substeps: the plant's physics steps per control period this episode.
         """
         self._latency_steps = draws.action_latency_steps
         self._gripper_latency_steps = draws.gripper_latency_steps
@@ -161,6 +165,8 @@ class ControlChain:
         self._target = None
         if draws.target is not None:
             self._target = DelayedTarget(draws.target.latency, draws.target.frame_period, draws.target.phase)
+        self.sees_through_camera = self._target is not None
+        self._substeps, self._physics_dt = substeps, physics_dt
         self._guard_on = draws.guard
         if self._guard_on:
             self._guard.restart()
@@ -222,7 +228,7 @@ class ControlChain:
         if not self._timing:
             self.advance_period(plant, arm_targets, gripper_width)
             return None
-        substeps, physics_dt = plant.substeps, plant.physics_dt
+        substeps, physics_dt = self._substeps, self._physics_dt
         delay = self._draw_substeps(rng, self._command_delay, physics_dt, substeps - 1)
         age = self._draw_substeps(rng, self._observation_age, physics_dt, substeps - 1)
         measured = None
@@ -273,17 +279,22 @@ class ControlChain:
         return min(int(round(seconds / physics_dt)), most)
 
     # ------------------------------------------------------------------ the way back
-    def sense(self, measured: Measurement, object_position: Sequence[float], tcp_to_object_distance: float,
-              held: bool, sample_time: float, now: float, rng: np.random.Generator) -> Sensed:
+    def sense(self, measured: Measurement, tcp_axis: Optional[Sequence[float]], object_position: Sequence[float],
+              tcp_to_object_distance: float, held: bool, sample_time: float, now: float,
+              rng: np.random.Generator) -> Sensed:
         """What the policy is given: the arm as ``measured`` (at ``sample_time``, s since the
         start), the object as the camera's timing shows it at ``now``.
 
+        :param tcp_axis: the tcp's approach axis of ``measured`` where the caller has it; None:
+            computed here.
         :param object_position: the object's true centre now (m, base_link).
         :param tcp_to_object_distance: m, now (the hand hides the object within a radius).
-        :param held: the object is in the hand as the detector's tracker decides it.
+        :param held: the object is in the hand as the detector's tracker decides it (read only
+            when :attr:`sees_through_camera`).
         """
         q, velocities, width, tcp_position, tcp_quaternion = measured
-        tcp_axis = quaternion_z_axis(tcp_quaternion)
+        if tcp_axis is None:
+            tcp_axis = quaternion_z_axis(tcp_quaternion)
         self.observed_joint_positions = q
         if self._bridge is not None:
             width = self._bridge.observe(width, sample_time)

@@ -101,8 +101,10 @@ class FR5Env(gym.Env):
         verdict = self.episode.judge_period(state)
         parts = self.task.reward(verdict.outcome, values)
         info: Dict[str, Any] = {"is_success": verdict.success, "failure": verdict.failure}
-        info.update((_REWARD_KEYS[name], value) for name, value in parts.items())
-        info.update((_TERM_KEYS[name], value) for name, value in verdict.terms.items())
+        for name, value in parts.items():
+            info[_REWARD_KEYS[name]] = value
+        for name, value in verdict.outcome.terms.items():
+            info[_TERM_KEYS[name]] = value
         if self.render_mode == "human":
             self.render()
         return observation, sum(parts.values()), verdict.terminated, verdict.truncated, info

@@ -82,23 +82,17 @@ class Episode:
         self.draws = draws = draw_episode(rng, self.cfg, self.robot_spec, self.task.name, self._physics_dt,
                                           self.chain.bridge_periods, self.chain.guard_available,
                                           options.get("object_xy"))
-        plant = self.plant
-        plant.set_object(draws.object_dims, draws.object_mass, draws.object_friction,
-                         self.cfg.object_rest_z(draws.object_size_scale))
-        plant.set_joint_damping(draws.joint_damping)
-        plant.set_physics_dt(draws.physics_dt, self.control_dt)
-        self.object_start = plant.place_object(draws.object_xy, draws.object_yaw)
         keep_arm = "arm_positions" in options
         start = (finite_values(options["arm_positions"], 6, "options['arm_positions']") if keep_arm
                  else draws.start_joint_positions)
         start = np.clip(start, self.robot_spec.lower_limits, self.robot_spec.upper_limits)
-        plant.reset_arm(start, self.robot_spec.max_opening_width)
+        self.object_start = self.plant.build_scene(draws, self.cfg.object_rest_z(draws.object_size_scale),
+                                                   start, self.control_dt)
         if keep_arm and "object_xy" not in options:
             self._place_clear_of_arm(rng)
-        self.chain.begin(draws, start, plant.physics_dt)
-        self.shaper.reset()
-        self.action_history.reset()
-        self.task.reset()
+        self.chain.begin(draws, start, self.plant.physics_dt, self.plant.substeps)
+        for part in (self.shaper, self.action_history, self.task):
+            part.reset()
         self.steps = 0
         state, observation = self.observe(None, 0.0, rng)
         self.task.prime(state)
@@ -146,9 +140,11 @@ class Episode:
         measured = self.plant.measure()
         self.state = state = task_state_from(measured, self.plant.object_pose(), self.plant.contacts(),
                                              self.object_start, self._workspace)
-        reading, age = early if early is not None else (measured, 0.0)
-        sensed = self.chain.sense(reading, state.object_position, state.tcp_to_object_distance,
-                                  self.held_as_the_camera_sees(state), now - age, now, rng)
+        chain = self.chain
+        reading, age, tcp_axis = (early[0], early[1], None) if early is not None else (measured, 0.0, state.tcp_approach_axis)
+        held = chain.sees_through_camera and self.held_as_the_camera_sees(state)
+        sensed = chain.sense(reading, tcp_axis, state.object_position, state.tcp_to_object_distance, held,
+                             now - age, now, rng)
         observation = self.observation_builder.build_from(
             sensed.joint_positions, sensed.joint_velocities, sensed.gripper_width, self.chain.sent_gripper_width,
             sensed.tcp_position, sensed.tcp_approach_axis, sensed.object_position,

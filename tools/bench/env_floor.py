@@ -36,8 +36,9 @@ def record_episodes(env, actions: np.ndarray, first_seed: int) -> List[Dict[str,
     recorded as they run: one entry per motor call."""
     import pybullet as p
 
-    robot, world = env.plant.robot, env.plant.world
-    original_command, original_step, original_step_physics = robot.command, world.step, world.step_physics
+    plant = env.plant
+    robot, world = plant.robot, plant.world
+    original_command, original_step, original_step_physics = plant.command, plant.step_period, plant.step_physics
     episodes: List[Dict[str, Any]] = []
 
     def command(joint_targets, opening_width, period=None):
@@ -73,12 +74,13 @@ def record_episodes(env, actions: np.ndarray, first_seed: int) -> List[Dict[str,
             episodes[-1]["touched"] = bool(p.getContactPoints(bodyA=robot.body, physicsClientId=world.client))
         return result
 
-    robot.command, world.step, world.step_physics, env.reset, env.step = command, step, step_physics, reset, env_step
+    plant.command, plant.step_period, plant.step_physics, env.reset, env.step = command, step, step_physics, reset, env_step
     try:
         run_seeded_episodes(env, actions, first_seed)
         episodes[-1]["final_joint_positions"] = env.joint_positions()
     finally:
-        del robot.command, world.step, world.step_physics, env.reset, env.step  # back to the class methods
+        plant.command, plant.step_period, plant.step_physics = original_command, original_step, original_step_physics
+        del env.reset, env.step  # back to the class methods
     return episodes
 
 

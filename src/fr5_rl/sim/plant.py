@@ -7,14 +7,17 @@ it advances physics, commands the joints and reads states back as named tuples i
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, NamedTuple, Optional, Sequence, Tuple
+from typing import NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
 from ..config import RobotSpec
+from ..draws import EpisodeDraws
 from ..env_config import EnvConfig, SimulationConfig
-from .robot import FR5Robot
+from .robot import FR5Robot, Measurement
 from .world import PyBulletWorld
+
+__all__ = ["Contacts", "JointStates", "Measurement", "Plant", "Pose", "SceneDescription"]
 
 
 class JointStates(NamedTuple):
@@ -42,23 +45,6 @@ class Pose(NamedTuple):
     position: Tuple[float, float, float]
     quaternion: Tuple[float, float, float, float]
     frame_id: str
-
-
-class Measurement(NamedTuple):
-    """One read of the arm (two simulator queries, plain floats: the step path).
-
-    :param joint_positions: arm angles (rad), controller order.
-    :param joint_velocities: arm rates (rad/s).
-    :param gripper_width: opening width (m), the sum of both fingers' travel.
-    :param tcp_position: (x, y, z) of the tcp in base_link (m), as the simulator computes it.
-    :param tcp_quaternion: (x, y, z, w) of the tcp frame in base_link.
-    """
-
-    joint_positions: List[float]
-    joint_velocities: List[float]
-    gripper_width: float
-    tcp_position: Tuple[float, float, float]
-    tcp_quaternion: Tuple[float, float, float, float]
 
 
 class Contacts(NamedTuple):
@@ -122,12 +108,35 @@ class Plant:
         self.world.add_table(cfg.table)
         self.robot = FR5Robot(self.world.client, robot, sim_cfg)
         self.robot.stand_on(self.world.table_id)  # its base never counts as touching the table
+        # The step path's calls, bound straight to the simulator's (no wrapper call at every
+        # physics step): command(arm_targets, gripper_width, period=None), step_physics(),
+        # step_period() and measure() -> Measurement, documented on FR5Robot and PyBulletWorld.
+        self.command = self.robot.command
+        self.step_physics = self.world.step_physics
+        self.step_period = self.world.step
+        self.measure = self.robot.measure
         self.joint_state_names = tuple(robot.joint_names) + tuple(robot.finger_joint_names)
         self.object_dims: Tuple[float, ...] = ()  # set per episode (set_object)
         self.object_rest_z = cfg.table.top_height
         self._held = None  # hold_object's constraint, or None
 
     # ------------------------------------------------------------------ the episode's scene
+    def build_scene(self, draws: EpisodeDraws, object_rest_z: float, start: Sequence[float], control_dt: float
+                    ) -> Tuple[float, float, float]:
+        """This episode's scene as drawn: a new object where the draws put it, the arm's damping,
+        the physics step, and the arm teleported to ``start`` (rad) with the gripper open.
+
+        :param object_rest_z: z (m, base_link) of the object's centre standing on the table.
+        :param control_dt: s per control period (the physics step divides it).
+        :return: the object's centre (m, base_link).
+        """
+        self.set_object(draws.object_dims, draws.object_mass, draws.object_friction, object_rest_z)
+        self.set_joint_damping(draws.joint_damping)
+        self.set_physics_dt(draws.physics_dt, control_dt)
+        placed = self.place_object(draws.object_xy, draws.object_yaw)
+        self.reset_arm(start, self.spec.max_opening_width)
+        return placed
+
     def set_object(self, dims: Tuple[float, ...], mass: float, friction: float, rest_z: float) -> None:
         """A new object of the configured shape (every episode).
 
@@ -176,24 +185,7 @@ class Plant:
         """Physics steps per control period."""
         return self.world.substeps
 
-    def command(self, arm_targets: Sequence[float], gripper_width: float, period: Optional[float] = None) -> None:
-        """Position targets: arm (rad, j1 .. j6) and opening width (m), standing for ``period``
-        seconds (default one control period: the fingers ramp at their rated speed over it)."""
-        self.robot.command(arm_targets, gripper_width, period=period)
-
-    def step_physics(self) -> None:
-        """Advance one physics step."""
-        self.world.step_physics()
-
-    def step_period(self) -> None:
-        """Advance one control period (``substeps`` physics steps)."""
-        self.world.step()
-
     # ------------------------------------------------------------------ states
-    def measure(self) -> Measurement:
-        """The arm's joints, gripper and tcp now (see :class:`Measurement`)."""
-        return Measurement(*self.robot.measure())
-
     def contacts(self) -> Contacts:
         """What the robot touches (one simulator query for all of its contacts)."""
         table, obj, finger_links = self.world.table_id, self.world.object_id, self.robot.finger_links

@@ -5,7 +5,7 @@ import hashlib
 import re
 import tempfile
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 from .bullet import p
@@ -64,6 +64,23 @@ def cap_joint_speeds(body: int, robot: RobotSpec, client: int) -> None:
     :param client: PyBullet client id.
     """
     p.changeDynamics(body, -1, maxJointVelocity=float(max(robot.velocity_limits)), physicsClientId=client)
+
+
+class Measurement(NamedTuple):
+    """One read of the arm (two simulator queries, plain floats: the step path).
+
+    :param joint_positions: arm angles (rad), controller order.
+    :param joint_velocities: arm rates (rad/s).
+    :param gripper_width: opening width (m), the sum of both fingers' travel.
+    :param tcp_position: (x, y, z) of the tcp in base_link (m), as the simulator computes it.
+    :param tcp_quaternion: (x, y, z, w) of the tcp frame in base_link.
+    """
+
+    joint_positions: List[float]
+    joint_velocities: List[float]
+    gripper_width: float
+    tcp_position: Tuple[float, float, float]
+    tcp_quaternion: Tuple[float, float, float, float]
 
 
 class FR5Robot:
@@ -182,17 +199,17 @@ class FR5Robot:
         self._joint_damping = damping
 
     # ------------------------------------------------------------------ state
-    def measure(self) -> Tuple[List[float], List[float], float, Tuple[float, ...], Tuple[float, ...]]:
+    def measure(self) -> Measurement:
         """One read of the robot, in two simulator queries and plain floats (the step path).
 
         Returns :meth:`joint_lists` and the tcp position (m) and quaternion (x, y, z, w) in
-        base_link as the simulator computes them. Equal to
+        base_link as the simulator computes them (:class:`Measurement`). Equal to
         :class:`fr5_rl.kinematics.ForwardKinematics` (the ROS node's FK) to < 1e-6 m; the test
         suite checks it.
         """
         positions, velocities, width = self.joint_lists()
         link = p.getLinkState(self.body, self.tcp_link, computeForwardKinematics=1, physicsClientId=self.client)
-        return positions, velocities, width, link[4], link[5]
+        return Measurement(positions, velocities, width, link[4], link[5])
 
     def joint_lists(self) -> Tuple[List[float], List[float], float]:
         """Measured arm positions (rad), velocities (rad/s), controller order, and gripper

@@ -1,0 +1,91 @@
+"""The objects a production line hands the arm: their shape, size and yaw, as the policy sees them.
+
+One convention everywhere (the simulator, the environment's observation, the detector, the
+policy node): an object's own frame has z up, and for a box x along its longer top side
+(``size[0] >= size[1]``). A yaw is the angle of that x axis in ``base_link``'s xy plane; a
+cylinder has none that matters.
+
+The policy sees the object's yaw relative to the gripper's as ``(sin kΔ, cos kΔ)`` with ``k``
+the order of the top's symmetry: 4 for a square (it repeats every 90°), 2 for a rectangle (every
+180°), 0 for a cylinder (``(0, 0)``: no yaw to match). Two yaws the object cannot tell apart
+then read the same, and the encoding has no jump anywhere.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence, Tuple
+
+SHAPES = ("cylinder", "box")
+
+
+@dataclass(frozen=True)
+class ObjectShape:
+    """An object's kind and size.
+
+    :param kind: ``cylinder`` or ``box``.
+    :param size: extent (m) along the object's own x, y and z (for a cylinder: diameter,
+        diameter, height; for a box ``size[0] >= size[1]``).
+    :param square_tolerance: m, top sides closer than this make a square (symmetry 4).
+    """
+
+    kind: str
+    size: Tuple[float, float, float]
+    square_tolerance: float = 0.002
+
+    def __post_init__(self) -> None:
+        if self.kind not in SHAPES:
+            raise ValueError(f"object kind must be one of {SHAPES}, got {self.kind!r}")
+        if len(self.size) != 3 or not all(math.isfinite(s) and s > 0.0 for s in self.size):
+            raise ValueError(f"object size must be three positive extents (m), got {self.size!r}")
+        if self.kind == "box" and self.size[0] < self.size[1]:
+            raise ValueError(f"a box's size lists its longer top side first, got {self.size!r}")
+
+    @classmethod
+    def from_dims(cls, kind: str, dims: Sequence[float]) -> "ObjectShape":
+        """From the simulator's dimensions: (radius, height) of a cylinder, (half_extent,) of a
+        cube, or (half_x, half_y, half_z) of a box."""
+        if kind == "cylinder":
+            radius, height = dims
+            return cls(kind, (2.0 * radius, 2.0 * radius, height))
+        if len(dims) == 1:
+            return cls(kind, (2.0 * dims[0],) * 3)
+        half_x, half_y, half_z = dims
+        return cls(kind, (2.0 * half_x, 2.0 * half_y, 2.0 * half_z))
+
+    @property
+    def symmetry_order(self) -> int:
+        """How many times the top repeats in a turn: 0 (a cylinder, any yaw), 4 (a square), 2."""
+        if self.kind == "cylinder":
+            return 0
+        return 4 if self.size[0] - self.size[1] <= self.square_tolerance else 2
+
+    @property
+    def grasp_width(self) -> float:
+        """m across the object where the fingers close on it: a cylinder's diameter, a box's
+        narrower top side."""
+        return self.size[1]
+
+    def yaw_features(self, object_yaw: float, gripper_yaw: float) -> Tuple[float, float]:
+        """``(sin kΔ, cos kΔ)`` of the object's yaw relative to the gripper's (rad, base_link),
+        ``k`` the symmetry order; ``(0, 0)`` for a cylinder."""
+        order = self.symmetry_order
+        if order == 0:
+            return 0.0, 0.0
+        relative = order * (object_yaw - gripper_yaw)
+        return math.sin(relative), math.cos(relative)
+
+    def yaw_error(self, yaw: float, goal_yaw: float) -> float:
+        """|yaw - goal_yaw| (rad) modulo the top's symmetry, in [0, pi / k]; 0 for a cylinder."""
+        order = self.symmetry_order
+        if order == 0:
+            return 0.0
+        period = 2.0 * math.pi / order
+        error = (yaw - goal_yaw) % period
+        return min(error, period - error)
+
+
+def yaw_of(quaternion: Sequence[float]) -> float:
+    """Yaw (rad) of a frame's x axis in the parent's xy plane, from its quaternion (x, y, z, w)."""
+    x, y, z, w = quaternion
+    return math.atan2(2.0 * (x * y + w * z), 1.0 - 2.0 * (y * y + z * z))
