@@ -77,7 +77,7 @@ ALLOWED = {
     "shared": {"shared"},
 }
 SHARED = {"config", "env_config", "kinematics", "observation", "control", "transforms", "gripper", "motion_guard",
-          "help_text", "draws", "fr5_rl"}
+          "help_text", "draws", "objects", "fr5_rl"}
 
 
 def kind(module: str) -> str:

@@ -37,7 +37,10 @@ class EpisodeDraws:
     """One episode's draws (see :func:`draw_episode`); units SI, positions in base_link.
 
     :param perturbed: the randomisation applies this episode (not a plain one).
-    :param object_dims: (radius, height) of a cylinder or (half_extent,) of a cube (m).
+    :param object_shape: ``cylinder`` or ``box``.
+    :param object_dims: (radius, height) of a cylinder, (half_extent,) of the configured cube, or
+        (half_x, half_y, half_z) of a drawn box with ``half_x >= half_y`` (m).
+    :param object_rest_z: z (m, base_link) of the object's centre standing on the table.
     :param object_size_scale: the factor the configured size was scaled by.
     :param object_mass: kg. :param object_friction: lateral friction coefficient.
     :param object_xy: where the object stands (m). :param object_yaw: its yaw (rad).
@@ -57,7 +60,9 @@ class EpisodeDraws:
     """
 
     perturbed: bool
+    object_shape: str
     object_dims: Tuple[float, ...]
+    object_rest_z: float
     object_size_scale: float
     object_mass: float
     object_friction: float
@@ -98,13 +103,21 @@ def draw_episode(rng: np.random.Generator, cfg: EnvConfig, robot: RobotSpec, tas
     :param object_xy: the object's place (m, base_link) given by the caller; None: drawn.
     """
     obj, rnd = cfg.object, cfg.randomisation
+    # The object's kind and nominal size: drawn only with object.variety on (first, so that the
+    # draws after it are made as in every other configuration).
+    shape, nominal_dims, nominal_mass = draw_object(rng, cfg) if obj.variety.enabled else (obj.shape, None, obj.mass)
     on = rnd.enabled
     if on and rnd.plain_episode_share > 0.0:  # drawn only when asked for: other configurations keep their episodes
         on = bool(rng.uniform() >= rnd.plain_episode_share)
     size = rng.uniform(*rnd.object_size_scale) if on else 1.0
-    mass = obj.mass * (rng.uniform(*rnd.object_mass_scale) if on else 1.0)
+    mass = nominal_mass * (rng.uniform(*rnd.object_mass_scale) if on else 1.0)
     friction = obj.lateral_friction * (rng.uniform(*rnd.friction_scale) if on else 1.0)
-    dims = (obj.radius * size, obj.height * size) if obj.shape == "cylinder" else (obj.half_extent * size,)
+    if nominal_dims is not None:
+        dims = tuple(value * size for value in nominal_dims)
+        rest_z = cfg.table.top_height + (dims[1] / 2.0 if shape == "cylinder" else dims[2])
+    else:  # the configured object, as every model before object.variety was trained on
+        dims = (obj.radius * size, obj.height * size) if obj.shape == "cylinder" else (obj.half_extent * size,)
+        rest_z = cfg.object_rest_z(size)
     damping = rng.uniform(*rnd.joint_damping) if on else 0.0
     # The simulated position controller tracks differently at other physics steps: drawing the
     # step per episode keeps a policy from relying on one simulator's exact response.
@@ -152,7 +165,7 @@ def draw_episode(rng: np.random.Generator, cfg: EnvConfig, robot: RobotSpec, tas
     noise = cfg.task(task).start_joint_noise
     start = robot.home_joint_positions + rng.uniform(-noise, noise, 6)
     return EpisodeDraws(
-        perturbed=on, object_dims=dims, object_size_scale=size, object_mass=mass, object_friction=friction,
+        perturbed=on, object_shape=shape, object_dims=dims, object_rest_z=rest_z, object_size_scale=size, object_mass=mass, object_friction=friction,
         object_xy=(float(xy[0]), float(xy[1])), object_yaw=yaw, start_joint_positions=tuple(start.tolist()),
         joint_damping=damping, physics_dt=drawn_physics_dt, action_latency_steps=latency,
         gripper_latency_steps=gripper_latency, observation_noise_std=rnd.observation_noise_std if on else 0.0,
@@ -170,3 +183,22 @@ def draw_place(rng: np.random.Generator, cfg: EnvConfig) -> Tuple[Tuple[float, f
     """
     xy = rng.uniform(np.asarray(cfg.object.region_low), np.asarray(cfg.object.region_high))
     return (float(xy[0]), float(xy[1])), float(rng.uniform(-np.pi, np.pi))
+
+
+def draw_object(rng: np.random.Generator, cfg: EnvConfig) -> Tuple[str, Tuple[float, ...], float]:
+    """One object of ``object.variety``: its kind, nominal dimensions and mass.
+
+    :return: the kind; (radius, height) of a cylinder or (half_x, half_y, half_z) of a box with
+        ``half_x >= half_y`` (its longer top side along its own x), m; the mass, kg.
+    """
+    variety = cfg.object.variety
+    kind = variety.kinds[int(rng.integers(len(variety.kinds)))]
+    if kind == "cylinder":
+        dims: Tuple[float, ...] = (float(rng.uniform(*variety.cylinder_radius)),
+                                   float(rng.uniform(*variety.cylinder_height)))
+    else:
+        side = float(rng.uniform(*variety.box_side))
+        other = side if rng.uniform() < variety.box_square_share else float(rng.uniform(*variety.box_side))
+        height = float(rng.uniform(*variety.box_height))
+        dims = (max(side, other) / 2.0, min(side, other) / 2.0, height / 2.0)
+    return kind, dims, float(rng.uniform(*variety.mass))

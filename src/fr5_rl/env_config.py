@@ -52,6 +52,38 @@ class TableConfig:
 
 
 @dataclass(frozen=True)
+class ObjectVarietyConfig:
+    """``object.variety``: objects of several kinds and sizes, drawn per episode (the production
+    line's boxes at any yaw and cylinders). Off: the one object ``object`` describes.
+
+    Ranges are [low, high], drawn uniformly. A box's top is square in ``box_square_share`` of the
+    boxes (both sides drawn once), else rectangular (two sides drawn apart, the longer along the
+    box's own x). Every width the fingers close across stays inside the gripper's stroke.
+    """
+
+    enabled: bool
+    kinds: List[str]  # drawn uniformly: cylinder | box
+    cylinder_radius: List[float]  # m
+    cylinder_height: List[float]  # m
+    box_side: List[float]  # m, each side of the top
+    box_height: List[float]  # m
+    box_square_share: float
+    mass: List[float]  # kg, replaces object.mass (object_mass_scale still applies when perturbed)
+
+    def check(self, source: str) -> None:
+        if not self.kinds or any(kind not in ("cylinder", "box") for kind in self.kinds):
+            raise ConfigError(f"{source}: 'object.variety.kinds' must list cylinder and/or box, got {self.kinds}")
+        for key in ("cylinder_radius", "cylinder_height", "box_side", "box_height", "mass"):
+            low_high = getattr(self, key)
+            if len(low_high) != 2 or not 0.0 < low_high[0] <= low_high[1]:
+                raise ConfigError(f"{source}: 'object.variety.{key}' must be [low, high] with 0 < low <= high, "
+                                  f"got {low_high}")
+        if not 0.0 <= self.box_square_share <= 1.0:
+            raise ConfigError(f"{source}: 'object.variety.box_square_share' must be in [0, 1], "
+                              f"got {self.box_square_share}")
+
+
+@dataclass(frozen=True)
 class ObjectConfig:
     """``object``: the cup (cylinder) or cube, and where it is placed (base_link x y, m)."""
 
@@ -68,6 +100,7 @@ class ObjectConfig:
     # object down inside the hand, and PyBullet would shoot it out through the table.
     placement_clearance: float
     placement_attempts: int
+    variety: ObjectVarietyConfig
 
     def check(self, source: str) -> None:
         if self.shape not in ("cylinder", "box"):
@@ -115,8 +148,12 @@ class ObservationConfig:
     previous_actions: int
     joint_step_hint: Optional[JointStepHintConfig]
     joint_velocity_source: str  # measured (the simulator's) | positions (estimated, as behind the FAIRINO driver)
+    object_features: bool  # the object's yaw relative to the gripper (by its symmetry) and its size
+    object_size_scale: float  # m of an object's extent mapped to 1
 
     def check(self, source: str) -> None:
+        if self.object_size_scale <= 0:
+            raise ConfigError(f"observation.object_size_scale must be > 0 m, got {self.object_size_scale}")
         if self.joint_velocity_source not in ("measured", "positions"):
             raise ConfigError(f"observation.joint_velocity_source must be measured or positions, "
                               f"got {self.joint_velocity_source!r}")
@@ -351,6 +388,14 @@ class EnvConfig:
 
     def check(self, source: str) -> None:
         """Refuse settings that would break the real robot's limits or the simulation."""
+        variety = self.object.variety
+        if variety.enabled:
+            widest = max(2.0 * variety.cylinder_radius[1] if "cylinder" in variety.kinds else 0.0,
+                         variety.box_side[1] if "box" in variety.kinds else 0.0)
+            stroke = load_robot_spec(self.robot).max_opening_width
+            if widest >= stroke:
+                raise ConfigError(f"object.variety: objects up to {widest * 1000:.0f} mm across, but the gripper opens "
+                                  f"{stroke * 1000:.0f} mm: keep every width the fingers close across below the stroke")
         for task in ("base", "reach", "grasp"):
             sim = self.simulation if task == "base" else self.simulation_for(task)
             if whole_multiple(sim.control_dt, sim.physics_dt) is None:

@@ -18,7 +18,7 @@ from .control_chain import ControlChain
 from .draws import EpisodeDraws, draw_episode, draw_place
 from .env_config import EnvConfig, load_env_config
 from .kinematics import ForwardKinematics
-from .observation import ActionHistory, ObservationBuilder
+from .observation import ActionHistory, ObservationBuilder, object_features
 from .sim.plant import JointStates, Measurement, Plant, Pose, SceneDescription
 from .tasks import TASKS, EpisodeVerdict, Task, TaskState, held_as_the_camera_sees, task_state_from
 
@@ -86,8 +86,7 @@ class Episode:
         start = (finite_values(options["arm_positions"], 6, "options['arm_positions']") if keep_arm
                  else draws.start_joint_positions)
         start = np.clip(start, self.robot_spec.lower_limits, self.robot_spec.upper_limits)
-        self.object_start = self.plant.build_scene(draws, self.cfg.object_rest_z(draws.object_size_scale),
-                                                   start, self.control_dt)
+        self.object_start = self.plant.build_scene(draws, start, self.control_dt)
         if keep_arm and "object_xy" not in options:
             self._place_clear_of_arm(rng)
         self.chain.begin(draws, start, self.plant.physics_dt, self.plant.substeps)
@@ -145,11 +144,14 @@ class Episode:
         held = chain.sees_through_camera and self.held_as_the_camera_sees(state)
         sensed = chain.sense(reading, tcp_axis, state.object_position, state.tcp_to_object_distance, held,
                              now - age, now, rng)
-        observation = self.observation_builder.build_from(
+        builder = self.observation_builder
+        shape = (object_features(self.plant.object_shape, state.object_quaternion, reading.tcp_quaternion)
+                 if builder.object_features else ())
+        observation = builder.build_from(
             sensed.joint_positions, sensed.joint_velocities, sensed.gripper_width, self.chain.sent_gripper_width,
             sensed.tcp_position, sensed.tcp_approach_axis, sensed.object_position,
             sensed.object_position[2] - self.plant.object_rest_z, self.action_history.values(),
-            tcp_jacobian=sensed.tcp_jacobian,
+            tcp_jacobian=sensed.tcp_jacobian, object_features=shape,
         )
         return state, observation
 
@@ -201,7 +203,7 @@ class Episode:
     def held_as_the_camera_sees(self, state: TaskState) -> bool:
         """The object is in the hand as the detector's tracker decides it
         (:func:`fr5_rl.tasks.held_as_the_camera_sees`)."""
-        return held_as_the_camera_sees(state, 2.0 * self.plant.object_dims[0], self.plant.object_rest_z,
+        return held_as_the_camera_sees(state, self.plant.object_shape.grasp_width, self.plant.object_rest_z,
                                        self.cfg.randomisation)
 
     @property

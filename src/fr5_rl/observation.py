@@ -22,6 +22,9 @@ then    the policy's previous arm actions      -1..1   as given (``observation.p
 then    joint step toward the object (6)       rad     / joint_step_hint.joint_step_scale
         (``observation.joint_step_hint``;              (only when the hint is configured)
         none by default)
+then    the object's shape (5): sin and cos    -1..1   as given; sizes / observation.
+        of k * (its yaw - the gripper's), its  and m   object_size_scale (only with
+        extent along its own x, y, z                   ``observation.object_features``)
 ======  =====================================  ======  ==================================
 
 The previous actions make latency observable. Behind a driver that applies a command one or two
@@ -52,17 +55,32 @@ import numpy as np
 from .config import RobotSpec
 from .env_config import JointStepHintConfig, ObservationConfig
 from .kinematics import ForwardKinematics, solve_linear as _solve
+from .objects import ObjectShape, yaw_of
 
 REACH_OBSERVATION_SIZE = 23  # without previous actions
 GRASP_OBSERVATION_SIZE = 24
 ARM_ACTION_SIZE = 6  # the arm components of the action (the seventh is the gripper)
+OBJECT_FEATURE_SIZE = 5  # sin, cos of the relative yaw by symmetry; the object's three extents
 
 
 def observation_size(task: str, obs_cfg: ObservationConfig) -> int:
     """Length of the observation vector of ``task`` (``reach`` or ``grasp``) under ``obs_cfg``."""
     base = GRASP_OBSERVATION_SIZE if task == "grasp" else REACH_OBSERVATION_SIZE
     hint = ARM_ACTION_SIZE if obs_cfg.joint_step_hint is not None else 0
-    return base + ARM_ACTION_SIZE * obs_cfg.previous_actions + hint
+    shape = OBJECT_FEATURE_SIZE if obs_cfg.object_features else 0
+    return base + ARM_ACTION_SIZE * obs_cfg.previous_actions + hint + shape
+
+
+def object_features(shape: ObjectShape, object_quaternion: Sequence[float],
+                    tcp_quaternion: Sequence[float]) -> List[float]:
+    """The raw object block of the observation: ``(sin kΔ, cos kΔ)`` of the object's yaw relative
+    to the gripper's (:meth:`ObjectShape.yaw_features`), then its extent along its own x, y, z (m).
+
+    :param object_quaternion: the object's orientation (x, y, z, w) in base_link.
+    :param tcp_quaternion: the tcp frame's orientation (x, y, z, w) in base_link.
+    """
+    sine, cosine = shape.yaw_features(yaw_of(object_quaternion), yaw_of(tcp_quaternion))
+    return [sine, cosine, *shape.size]
 
 
 class JointStepHint:
@@ -182,6 +200,7 @@ class ObservationInputs:
     object_position: Sequence[float]  # (3,) m, object centre
     object_lift: float = 0.0  # m above the resting height (grasp only)
     previous_actions: Sequence[float] = ()  # ActionHistory.values(): 6 * previous_actions values
+    object_features: Sequence[float] = ()  # object_features(): 5 values with observation.object_features
 
 
 class ObservationBuilder:
@@ -204,6 +223,10 @@ class ObservationBuilder:
         self.joint_step_hint: Optional[JointStepHint] = None if hint is None else JointStepHint(robot, hint)
         if self.joint_step_hint is not None:
             self.size += ARM_ACTION_SIZE
+        self.object_features = obs_cfg.object_features
+        self._object_size_gain = 1.0 / obs_cfg.object_size_scale
+        if self.object_features:
+            self.size += OBJECT_FEATURE_SIZE
         low = np.asarray(obs_cfg.tcp_position_low, dtype=np.float64)
         high = np.asarray(obs_cfg.tcp_position_high, dtype=np.float64)
         half_width = robot.max_opening_width / 2.0
@@ -225,6 +248,7 @@ class ObservationBuilder:
             inputs.joint_positions, inputs.joint_velocities, inputs.gripper_width,
             inputs.gripper_command_width, inputs.tcp_position, inputs.tcp_approach_axis,
             inputs.object_position, inputs.object_lift, inputs.previous_actions, out=out,
+            object_features=inputs.object_features,
         )
 
     def build_from(self, joint_positions: Sequence[float], joint_velocities: Sequence[float],
@@ -232,11 +256,14 @@ class ObservationBuilder:
                    tcp_approach_axis: Sequence[float], object_position: Sequence[float],
                    object_lift: float = 0.0, previous_actions: Sequence[float] = (),
                    out: Optional[np.ndarray] = None,
-                   tcp_jacobian: Optional[Tuple[List[float], List[float], List[List[float]]]] = None) -> np.ndarray:
+                   tcp_jacobian: Optional[Tuple[List[float], List[float], List[List[float]]]] = None,
+                   object_features: Sequence[float] = ()) -> np.ndarray:
         """The observation from the fields of :class:`ObservationInputs`, given as arguments.
 
         ``tcp_jacobian``: the joint-step hint's kinematics of ``joint_positions``
         (:meth:`ForwardKinematics.tcp_jacobian`) where the caller computed them already.
+        ``object_features``: :func:`object_features` of the object, with
+        ``observation.object_features`` (else empty).
 
         Raises ValueError on NaN or inf, on something that is not a number, or on a sequence
         of the wrong length. Finite values outside their range are clipped to [-1, 1].
@@ -244,13 +271,15 @@ class ObservationBuilder:
         try:
             lengths_ok = (len(joint_positions) == 6 and len(joint_velocities) == 6 and len(tcp_position) == 3
                           and len(tcp_approach_axis) == 3 and len(object_position) == 3
-                          and len(previous_actions) == ARM_ACTION_SIZE * self.previous_actions)
+                          and len(previous_actions) == ARM_ACTION_SIZE * self.previous_actions
+                          and len(object_features) == (OBJECT_FEATURE_SIZE if self.object_features else 0))
         except TypeError:  # a scalar where a sequence belongs
             lengths_ok = False
         if not lengths_ok:
             raise ValueError("observation inputs need 6 joint positions, 6 velocities, 3-D tcp position, "
-                             "approach axis and object position, and "
-                             f"{ARM_ACTION_SIZE * self.previous_actions} previous-action values")
+                             "approach axis and object position, "
+                             f"{ARM_ACTION_SIZE * self.previous_actions} previous-action values and "
+                             f"{OBJECT_FEATURE_SIZE if self.object_features else 0} object-shape values")
         try:
             tcp_x, tcp_y, tcp_z = tcp_position
             object_x, object_y, object_z = object_position
@@ -260,6 +289,8 @@ class ObservationBuilder:
                 raw.append(object_lift)
             history = [float(value) for value in previous_actions] if self.previous_actions else None
             total = sum(raw) + sum(history) if history else sum(raw)
+            if self.object_features:
+                total += sum(float(value) for value in object_features)
             finite = math.isfinite(total)  # a single NaN or inf makes the sum non-finite
             values = []
             if finite:
@@ -270,6 +301,11 @@ class ObservationBuilder:
                     values.extend(1.0 if value > 1.0 else (-1.0 if value < -1.0 else value) for value in history)
                 if self.joint_step_hint is not None:
                     values.extend(self.joint_step_hint(joint_positions, object_position, tcp_jacobian))
+                if self.object_features:
+                    sine, cosine, *extents = (float(value) for value in object_features)
+                    values.extend((sine, cosine))
+                    gain = self._object_size_gain
+                    values.extend(min(value * gain, 1.0) for value in extents)
         except (TypeError, ValueError) as error:  # strings, None, arrays where numbers belong
             raise ValueError(f"observation inputs must be numbers and sequences of numbers: {error}") from None
         if not finite:

@@ -241,6 +241,11 @@ class DeploymentStep:
         self.policy = policy
         self.control_dt = env_cfg.simulation.control_dt
         self.kinematics = ForwardKinematics(robot)
+        if env_cfg.observation.object_features:
+            # The node has the object's position from tf, not yet its shape and size (issue #53):
+            # running the model without them would feed it an object it was not trained on.
+            raise ModelFilesError("the policy observes the object's shape and size (observation.object_features), "
+                                  "which the policy node does not take yet: deploy a model trained without them")
         self.builder = ObservationBuilder(robot, env_cfg.observation, policy.task == "grasp")
         if self.builder.size != policy.observation_size:
             raise ModelFilesError(f"the policy takes {policy.observation_size} observation values; this fr5_rl "

@@ -250,8 +250,8 @@ class CameraNode:
         self.rendered_stamp = stamp_ns
         if obj.type == Marker.CYLINDER:
             shape, dims = "cylinder", (obj.scale.x / 2.0, obj.scale.z)
-        else:
-            shape, dims = "box", (obj.scale.x / 2.0,)
+        else:  # a box of any proportions: its three half extents
+            shape, dims = "box", (obj.scale.x / 2.0, obj.scale.y / 2.0, obj.scale.z / 2.0)
         pose = obj.pose
         self.camera.set_joints(joints)
         self.camera.set_object(shape, dims, (pose.position.x, pose.position.y, pose.position.z),

@@ -84,7 +84,8 @@ class SimulatedCamera:
 
     def set_object(self, shape: str, dims: Tuple[float, ...], position: Sequence[float],
                    quaternion: Sequence[float]) -> None:
-        """Place the object: ``shape`` "cylinder" (dims radius, height) or "box" (half extent),
+        """Place the object: ``shape`` "cylinder" (dims radius, height) or "box" (a cube's half
+        extent, or a box's three),
         centre position (m) and quaternion (x, y, z, w) in base_link. A new body is made only
         when the shape or size changes."""
         key = (shape, tuple(round(float(d), 5) for d in dims))

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..config import RobotSpec
 from ..draws import EpisodeDraws
+from ..objects import ObjectShape
 from ..env_config import EnvConfig, SimulationConfig
 from .robot import FR5Robot, Measurement
 from .world import PyBulletWorld
@@ -70,7 +71,7 @@ class SceneDescription:
     :param table_top_height: z (m) of the table's top face.
     :param object_shape: ``"cylinder"`` or ``"box"``.
     :param object_dims: as placed this episode (after any size randomisation): (radius,
-        height) of a cylinder or (half_extent,) of a cube, metres.
+        height) of a cylinder, (half_extent,) of a cube or (half_x, half_y, half_z) of a box, metres.
     :param object_rest_z: z (m) of the object's centre when it stands on the table.
     """
 
@@ -85,10 +86,7 @@ class SceneDescription:
     @property
     def object_size(self) -> Tuple[float, float, float]:
         """Extent (m) of the object along its own x, y and z axes (its bounding box)."""
-        if self.object_shape == "cylinder":
-            radius, height = self.object_dims
-            return (2.0 * radius, 2.0 * radius, height)
-        return (2.0 * self.object_dims[0],) * 3
+        return ObjectShape.from_dims(self.object_shape, self.object_dims).size
 
 
 class Plant:
@@ -116,36 +114,40 @@ class Plant:
         self.step_period = self.world.step
         self.measure = self.robot.measure
         self.joint_state_names = tuple(robot.joint_names) + tuple(robot.finger_joint_names)
-        self.object_dims: Tuple[float, ...] = ()  # set per episode (set_object)
+        self.object_kind = cfg.object.shape  # set per episode (set_object)
+        self.object_dims: Tuple[float, ...] = ()
+        self.object_shape: Optional[ObjectShape] = None
         self.object_rest_z = cfg.table.top_height
         self._held = None  # hold_object's constraint, or None
 
     # ------------------------------------------------------------------ the episode's scene
-    def build_scene(self, draws: EpisodeDraws, object_rest_z: float, start: Sequence[float], control_dt: float
-                    ) -> Tuple[float, float, float]:
+    def build_scene(self, draws: EpisodeDraws, start: Sequence[float], control_dt: float) -> Tuple[float, float, float]:
         """This episode's scene as drawn: a new object where the draws put it, the arm's damping,
         the physics step, and the arm teleported to ``start`` (rad) with the gripper open.
 
-        :param object_rest_z: z (m, base_link) of the object's centre standing on the table.
         :param control_dt: s per control period (the physics step divides it).
         :return: the object's centre (m, base_link).
         """
-        self.set_object(draws.object_dims, draws.object_mass, draws.object_friction, object_rest_z)
+        self.set_object(draws.object_shape, draws.object_dims, draws.object_mass, draws.object_friction,
+                        draws.object_rest_z)
         self.set_joint_damping(draws.joint_damping)
         self.set_physics_dt(draws.physics_dt, control_dt)
         placed = self.place_object(draws.object_xy, draws.object_yaw)
         self.reset_arm(start, self.spec.max_opening_width)
         return placed
 
-    def set_object(self, dims: Tuple[float, ...], mass: float, friction: float, rest_z: float) -> None:
-        """A new object of the configured shape (every episode).
+    def set_object(self, shape: str, dims: Tuple[float, ...], mass: float, friction: float, rest_z: float) -> None:
+        """A new object (every episode).
 
-        :param dims: (radius, height) of a cylinder or (half_extent,) of a cube, metres.
+        :param shape: ``cylinder`` or ``box``.
+        :param dims: (radius, height) of a cylinder, (half_extent,) of a cube or (half_x, half_y,
+            half_z) of a box, metres.
         :param mass: kg. :param friction: lateral friction coefficient.
         :param rest_z: z (m, base_link) of its centre standing on the table.
         """
-        self.world.set_object(self.cfg.object.shape, dims, mass, friction)
-        self.object_dims, self.object_rest_z = dims, rest_z
+        self.world.set_object(shape, dims, mass, friction)
+        self.object_kind, self.object_dims, self.object_rest_z = shape, dims, rest_z
+        self.object_shape = ObjectShape.from_dims(shape, dims)
 
     def place_object(self, xy: Sequence[float], yaw: float) -> Tuple[float, float, float]:
         """Stand the object on the table at ``xy`` (m, base_link) with ``yaw`` (rad).
@@ -228,7 +230,7 @@ class Plant:
         return SceneDescription(
             frame_id=self.spec.base_frame, table_size=(sx, sy, thickness),
             table_center=(cx, cy, top - thickness / 2.0), table_top_height=top,
-            object_shape=self.cfg.object.shape, object_dims=tuple(float(d) for d in self.object_dims),
+            object_shape=self.object_kind, object_dims=tuple(float(d) for d in self.object_dims),
             object_rest_z=self.object_rest_z,
         )
 

@@ -71,7 +71,8 @@ class PyBulletWorld:
     def set_object(self, shape: str, dims: Tuple[float, ...], mass: float, friction: float) -> int:
         """Create the object as a new body (at the start of every episode); returns its id.
 
-        ``dims`` is (radius, height) for a cylinder, (half_extent,) for a cube, in metres. A new
+        ``dims`` is (radius, height) for a cylinder, (half_extent,) for a cube or (half_x, half_y,
+        half_z) for a box, in metres. A new
         body carries no contact cache or sleep history from the last episode. PyBullet still
         keeps a trace of the episode before (the same seed after a different one differs by
         ~1e-8 m, in rare contact-rich cases by up to 0.4 mm); only a rebuilt world
@@ -100,9 +101,9 @@ class PyBulletWorld:
                 visual = p.createVisualShape(p.GEOM_CYLINDER, radius=radius, length=height, rgbaColor=color,
                                              physicsClientId=self.client) if self.renders else -1
             elif shape == "box":
-                (half,) = dims
-                collision = p.createCollisionShape(p.GEOM_BOX, halfExtents=[half] * 3, physicsClientId=self.client)
-                visual = p.createVisualShape(p.GEOM_BOX, halfExtents=[half] * 3, rgbaColor=color,
+                halves = [dims[0]] * 3 if len(dims) == 1 else list(dims)  # a cube, or (half_x, half_y, half_z)
+                collision = p.createCollisionShape(p.GEOM_BOX, halfExtents=halves, physicsClientId=self.client)
+                visual = p.createVisualShape(p.GEOM_BOX, halfExtents=halves, rgbaColor=color,
                                              physicsClientId=self.client) if self.renders else -1
             else:
                 raise ValueError(f"object.shape must be 'cylinder' or 'box', got '{shape}'")

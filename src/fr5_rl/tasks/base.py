@@ -31,6 +31,7 @@ class TaskState:
     arm_object_contact: bool  # a robot link other than the finger pads touches the object
     fingers_object_contact: int  # how many finger pads touch the object (0, 1, 2)
     tcp_in_workspace: bool
+    object_quaternion: Sequence[float] = (0.0, 0.0, 0.0, 1.0)  # (x, y, z, w) of the object in base_link
 
 
 @dataclass
@@ -97,6 +98,7 @@ def task_state_from(measured, object_pose, contacts, object_start: Sequence[floa
         object_start_position=object_start, robot_table_contact=contacts.table,
         arm_object_contact=contacts.arm_object, fingers_object_contact=contacts.finger_pads,
         tcp_in_workspace=x_low <= x <= x_high and y_low <= y <= y_high and z_low <= z <= z_high,
+        object_quaternion=object_quaternion,
     )
 
 
