@@ -56,7 +56,7 @@ ALLOWED = {
     "cli": {"training", "deploy", "shared", "envs", "expert", "sim", "tasks", "cli", "sim_to_real"},
     # Record, replay, compare and fit (compare_run.py, fit_driver.py): tools, never deployed.
     "sim_to_real": {"sim_to_real", "shared", "episode", "sim", "tasks"},
-    "training": {"training", "deploy", "shared", "envs", "expert", "sim", "tasks"},
+    "training": {"training", "deploy", "shared", "envs", "goal_env", "expert", "sim", "tasks"},
     # The rehearsal's chain in one process: the simulator, the drivers and the deployed node's code.
     "chain_emulation": {"shared", "episode", "sim", "tasks", "deploy", "drivers"},
     "deploy": {"deploy", "shared"},
@@ -64,6 +64,8 @@ ALLOWED = {
     "drivers": {"drivers", "shared"},
     # The simulator node's episodes without ROS: phases, commands, records.
     "episode_runner": {"shared", "episode", "sim", "tasks"},
+    # The place task in the goal-conditioned API (HER), around the gym environment.
+    "goal_env": {"shared", "envs"},
     # gymnasium's API around one episode.
     "envs": {"shared", "episode", "tasks"},
     # One episode: the plant (sim), the control chain, the task.

@@ -158,7 +158,7 @@ def test_help_shows_each_options_default():
     from fr5_rl.cli.train import build_parser
 
     text = " ".join(build_parser().format_help().split())
-    for option, default in (("--task {reach,grasp}", "reach"), ("--algo {ppo,sac,td3,tqc}", "ppo"), ("--seed SEED", "0")):
+    for option, default in (("--task {reach,grasp,place}", "reach"), ("--algo {ppo,sac,td3,tqc}", "ppo"), ("--seed SEED", "0")):
         assert f"{option} (default: {default})" in text, option
     assert "--resume continue" in text and "(default: False)" not in text  # a switch says nothing of False
 

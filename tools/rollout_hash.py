@@ -95,7 +95,7 @@ def main(argv=None) -> int:
     load_policy = _import_policy_loader()
     seeds = range(7_000_000, 7_000_000 + args.episodes)
     results: Dict[str, Any] = {}
-    for task in ("reach", "grasp"):
+    for task in ("reach", "grasp", "place"):
         results[f"{task}/random"] = rollout_digest(task, {}, random_actor(1), seeds)
         randomisation = {"randomisation": SHIPPED_RANDOMISATION}
         results[f"{task}/randomised"] = rollout_digest(task, randomisation, random_actor(2), seeds)

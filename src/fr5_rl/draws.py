@@ -57,6 +57,8 @@ class EpisodeDraws:
         the gripper is driven directly this episode.
     :param target: the camera's timing, or None: the object is seen as it is.
     :param guard: the policy node's motion guard limits this episode's commands.
+    :param goal: where the object is to be set down: (x, y) in m, base_link, and its yaw in rad
+        (the place task's; None for the others).
     """
 
     perturbed: bool
@@ -80,6 +82,7 @@ class EpisodeDraws:
     bridge_phases: Optional[Tuple[float, float, float]]
     target: Optional[TargetTiming]
     guard: bool
+    goal: Optional[Tuple[float, float, float]] = None
 
     @property
     def in_period_timing(self) -> bool:
@@ -164,6 +167,8 @@ def draw_episode(rng: np.random.Generator, cfg: EnvConfig, robot: RobotSpec, tas
     yaw = float(rng.uniform(-np.pi, np.pi))
     noise = cfg.task(task).start_joint_noise
     start = robot.home_joint_positions + rng.uniform(-noise, noise, 6)
+    # The goal: drawn last, and only by a task that has one, so every other task's draws stay.
+    goal = draw_goal(rng, cfg, xy) if task == "place" else None
     return EpisodeDraws(
         perturbed=on, object_shape=shape, object_dims=dims, object_rest_z=rest_z, object_size_scale=size, object_mass=mass, object_friction=friction,
         object_xy=(float(xy[0]), float(xy[1])), object_yaw=yaw, start_joint_positions=tuple(start.tolist()),
@@ -171,7 +176,7 @@ def draw_episode(rng: np.random.Generator, cfg: EnvConfig, robot: RobotSpec, tas
         gripper_latency_steps=gripper_latency, observation_noise_std=rnd.observation_noise_std if on else 0.0,
         command_delay_s=tuple(rnd.command_delay_s) if timing else (0.0, 0.0),
         observation_age_s=tuple(rnd.observation_age_s) if timing else (0.0, 0.0),
-        response_time_constants=response, bridge_phases=bridge, target=target, guard=guard,
+        response_time_constants=response, bridge_phases=bridge, target=target, guard=guard, goal=goal,
     )
 
 
@@ -202,3 +207,23 @@ def draw_object(rng: np.random.Generator, cfg: EnvConfig) -> Tuple[str, Tuple[fl
         height = float(rng.uniform(*variety.box_height))
         dims = (max(side, other) / 2.0, min(side, other) / 2.0, height / 2.0)
     return kind, dims, float(rng.uniform(*variety.mass))
+
+
+def draw_goal(rng: np.random.Generator, cfg: EnvConfig, object_xy: Sequence[float]) -> Tuple[float, float, float]:
+    """Where the place task sets the object down: uniform over ``object.region_*``, at least
+    ``place.min_goal_distance`` from the object (else, after ``place.goal_attempts`` draws, the
+    farthest drawn), at a uniform yaw.
+
+    :return: (x, y) in m, base_link, and the yaw in rad.
+    """
+    place, obj = cfg.place, cfg.object
+    low, high = np.asarray(obj.region_low), np.asarray(obj.region_high)
+    best, best_distance = None, -1.0
+    for _ in range(place.goal_attempts):
+        xy = rng.uniform(low, high)
+        distance = float(np.hypot(xy[0] - object_xy[0], xy[1] - object_xy[1]))
+        if distance > best_distance:
+            best, best_distance = xy, distance
+        if distance >= place.min_goal_distance:
+            break
+    return float(best[0]), float(best[1]), float(rng.uniform(-np.pi, np.pi))

@@ -198,6 +198,32 @@ class GraspConfig:
 
 
 @dataclass(frozen=True)
+class PlaceConfig:
+    """``place``: pick the object up and set it down at a goal pose on the table (issue #53).
+
+    Success is every test at once: the object rests within ``position_tolerance`` of the goal (xy),
+    a box's yaw within ``yaw_tolerance_deg`` of the goal's modulo its top's symmetry, upright
+    within ``upright_tolerance_deg``, released (no finger touches it and the tcp is at least
+    ``release_clearance`` above its top), and at rest (slower than ``rest_speed``).
+    """
+
+    simulation: Dict[str, Any]
+    max_steps: int
+    start_joint_noise: float  # rad
+    close_distance: float  # m, tcp to object within which the shaping asks the gripper to close
+    out_of_reach_margin: float  # m beyond the placement region where an object is out of reach
+    knocked_over_angle_deg: float
+    min_goal_distance: float  # m, goal to the object's start (xy), at least
+    goal_attempts: int  # draws of a goal that far away before the farthest drawn is taken
+    carry_height: float  # m: the shaping lifts the object this high while carrying it
+    position_tolerance: float  # m
+    yaw_tolerance_deg: float
+    upright_tolerance_deg: float
+    release_clearance: float  # m, tcp above the object's top
+    rest_speed: float  # m/s
+
+
+@dataclass(frozen=True)
 class RewardWeights:
     """``reward.weights`` of the shaping terms."""
 
@@ -205,6 +231,9 @@ class RewardWeights:
     orientation: float
     gripper: float
     lift: float
+    carry: float  # place: object to goal (xy)
+    yaw: float  # place: a box's yaw to the goal's
+    release: float  # place: the tcp clear above the placed object
 
 
 @dataclass(frozen=True)
@@ -318,7 +347,10 @@ class SafetyZoneConfig:
     gripper_length: float
 
 
-TaskConfig = Union[ReachConfig, GraspConfig]
+TaskConfig = Union[ReachConfig, GraspConfig, PlaceConfig]
+# The tasks the configuration describes: each has a section of that name (config/env.yaml) and a
+# module in fr5_rl.tasks.
+TASK_NAMES = ("reach", "grasp", "place")
 
 
 @dataclass(frozen=True)
@@ -353,16 +385,17 @@ class EnvConfig:
     workspace: WorkspaceConfig
     reach: ReachConfig
     grasp: GraspConfig
+    place: PlaceConfig
     reward: RewardConfig
     randomisation: RandomisationConfig
     safety_zone: SafetyZoneConfig
     deployed: DeployedChainConfig  # from the nodes' files, not env.yaml
 
     def task(self, name: str) -> TaskConfig:
-        """The section of task ``name`` (``reach`` or ``grasp``)."""
-        if name not in ("reach", "grasp"):
-            raise ConfigError(f"unknown task '{name}'; choose reach or grasp")
-        return self.reach if name == "reach" else self.grasp
+        """The section of task ``name`` (:data:`TASK_NAMES`)."""
+        if name not in TASK_NAMES:
+            raise ConfigError(f"unknown task '{name}'; choose one of {', '.join(TASK_NAMES)}")
+        return getattr(self, name)
 
     def simulation_for(self, task: str) -> SimulationConfig:
         """``simulation`` with the task's own overrides (``<task>.simulation``) applied."""
@@ -396,7 +429,7 @@ class EnvConfig:
             if widest >= stroke:
                 raise ConfigError(f"object.variety: objects up to {widest * 1000:.0f} mm across, but the gripper opens "
                                   f"{stroke * 1000:.0f} mm: keep every width the fingers close across below the stroke")
-        for task in ("base", "reach", "grasp"):
+        for task in ("base", *TASK_NAMES):
             sim = self.simulation if task == "base" else self.simulation_for(task)
             if whole_multiple(sim.control_dt, sim.physics_dt) is None:
                 raise ConfigError(f"{task}: simulation.physics_dt ({sim.physics_dt}) must divide control_dt "

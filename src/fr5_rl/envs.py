@@ -25,7 +25,8 @@ from .episode import Episode
 from .tasks import TASKS, TaskState
 
 _REWARD_KEYS = {name: f"reward_{name}" for name in ("success", "collision", "failure", "progress", "action")}
-_TERM_KEYS = {name: f"term_{name}" for name in ("approach", "orientation", "gripper", "lift")}
+_TERM_KEYS = {name: f"term_{name}" for name in ("approach", "orientation", "gripper", "lift", "carry", "yaw",
+                                                 "release")}
 
 
 class FR5Env(gym.Env):

@@ -18,7 +18,7 @@ from .control_chain import ControlChain
 from .draws import EpisodeDraws, draw_episode, draw_place
 from .env_config import EnvConfig, load_env_config
 from .kinematics import ForwardKinematics
-from .observation import ActionHistory, ObservationBuilder, object_features
+from .observation import ActionHistory, ObservationBuilder, goal_features, object_features
 from .sim.plant import JointStates, Measurement, Plant, Pose, SceneDescription
 from .tasks import TASKS, EpisodeVerdict, Task, TaskState, held_as_the_camera_sees, task_state_from
 
@@ -40,7 +40,8 @@ class Episode:
         self.task: Task = TASKS[task](cfg, robot.max_opening_width)
         self.kinematics = ForwardKinematics(robot)
         self.shaper = JointCommandShaper(robot, cfg.action, self.control_dt)
-        self.observation_builder = ObservationBuilder(robot, cfg.observation, self.task.include_lift)
+        self.observation_builder = ObservationBuilder(robot, cfg.observation, self.task.include_lift,
+                                                      self.task.include_goal)
         self.action_history = ActionHistory(self.observation_builder.previous_actions)
         sim_cfg = cfg.simulation_for(task)
         self._physics_dt = sim_cfg.physics_dt
@@ -92,6 +93,7 @@ class Episode:
         self.chain.begin(draws, start, self.plant.physics_dt, self.plant.substeps)
         for part in (self.shaper, self.action_history, self.task):
             part.reset()
+        self.task.start(draws, self.plant.object_shape)
         self.steps = 0
         state, observation = self.observe(None, 0.0, rng)
         self.task.prime(state)
@@ -147,11 +149,13 @@ class Episode:
         builder = self.observation_builder
         shape = (object_features(self.plant.object_shape, state.object_quaternion, reading.tcp_quaternion)
                  if builder.object_features else ())
+        goal = (goal_features(self.plant.object_shape, sensed.object_position, state.object_quaternion,
+                              self.draws.goal) if builder.include_goal else ())
         observation = builder.build_from(
             sensed.joint_positions, sensed.joint_velocities, sensed.gripper_width, self.chain.sent_gripper_width,
             sensed.tcp_position, sensed.tcp_approach_axis, sensed.object_position,
             sensed.object_position[2] - self.plant.object_rest_z, self.action_history.values(),
-            tcp_jacobian=sensed.tcp_jacobian, object_features=shape,
+            tcp_jacobian=sensed.tcp_jacobian, object_features=shape, goal=goal,
         )
         return state, observation
 

@@ -30,7 +30,10 @@ class ScriptedExpert:
     at_grasp_tolerance = 0.008  # m from the grasp point under which it closes
     # Cartesian speed per phase (m per 20 ms control step): fast in free space, slow near the
     # object so that the arm's few steps of tracking lag do not overshoot into it.
-    phase_speed = {"hover": 0.015, "descend": 0.006, "close": 0.006, "lift": 0.006}
+    place_funnel = 0.02  # m from the goal within which the expert lowers a carried object
+    place_tolerance = 0.008  # m from the goal within which it lets go
+    phase_speed = {"hover": 0.015, "descend": 0.006, "close": 0.006, "lift": 0.006,
+                   "carry": 0.008, "lower": 0.004, "release": 0.004, "retreat": 0.008}
 
     def __init__(self, env) -> None:
         self.env: FR5Env = env.unwrapped
@@ -59,13 +62,16 @@ class ScriptedExpert:
         q = state.joint_positions
         tcp_x, tcp_y, tcp_z = state.tcp_position
         object_x, object_y, object_z = state.object_position
-        grasp = env.task.name == "grasp"
+        grasp = env.task.name in ("grasp", "place")
         grasp_z = object_z + (self.grasp_height_offset if grasp else 0.0)
         dx, dy, dz = object_x - tcp_x, object_y - tcp_y, grasp_z - tcp_z  # to the grasp point
         horizontal_error = math.sqrt(dx * dx + dy * dy)
         held = grasp and state.fingers_object_contact == 2 and \
             env.episode.gripper_command_width < env.robot_spec.max_opening_width / 2.0
-        if held:
+        placing = self._place_phase(state, held) if env.task.name == "place" else None
+        if placing is not None:
+            phase, target = placing
+        elif held:
             phase = "lift"
             target = (object_x, object_y, state.object_start_position[2] + self.grasp_height_offset + self.lift_clearance)
         elif grasp and math.sqrt(dx * dx + dy * dy + dz * dz) < self.at_grasp_tolerance:
@@ -93,8 +99,38 @@ class ScriptedExpert:
         delta = [(wanted - angle) / max_step for wanted, angle in zip(joint_targets, q)]
         # Scale the whole joint step (not per joint) so the motion keeps its direction.
         scale = max(1.0, max(abs(value) for value in delta))
-        gripper = -1.0 if phase in ("close", "lift") else 1.0
+        gripper = -1.0 if phase in ("close", "lift", "carry", "lower") else 1.0
         return np.array([value / scale for value in delta] + [gripper], dtype=np.float32)
+
+    def _place_phase(self, state, held: bool):
+        """The place task's phases after the grasp, or None while grasping: carry the object above
+        the goal, lower it onto the table, let go, and rise clear of it. Cylinders only: the
+        expert keeps the gripper's yaw, so it cannot turn a box to a goal yaw."""
+        task = self.env.task
+        goal_x, goal_y, _ = task.goal
+        object_x, object_y, object_z = state.object_position
+        start_z = state.object_start_position[2]
+        to_goal = math.hypot(goal_x - object_x, goal_y - object_y)
+        tcp_x, tcp_y, tcp_z = state.tcp_position
+        offset_x, offset_y = tcp_x - object_x, tcp_y - object_y  # the object's place in the hand
+        resting_grasp_z = start_z + self.grasp_height_offset
+        if held:
+            hand_over_goal = (goal_x + offset_x, goal_y + offset_y)
+            if to_goal > self.place_funnel:
+                # Up to the carry height first, then over the goal.
+                carry_z = resting_grasp_z + self.lift_clearance
+                if tcp_z < carry_z - 0.02:
+                    return "carry", (tcp_x, tcp_y, carry_z)
+                return "carry", (*hand_over_goal, carry_z)
+            if object_z - start_z > 0.003 or to_goal > self.place_tolerance:
+                # Down onto the goal, still closing the last millimetres over it.
+                return "lower", (*hand_over_goal, resting_grasp_z - 0.002)
+            return "release", (tcp_x, tcp_y, tcp_z)
+        if to_goal <= task.settings.position_tolerance and abs(object_z - start_z) < 0.005:
+            if state.gripper_width < 0.9 * self.env.robot_spec.max_opening_width:
+                return "release", (tcp_x, tcp_y, tcp_z)  # the fingers still opening
+            return "retreat", (tcp_x, tcp_y, object_z + self.hover_height)
+        return None
 
     def _inverse_kinematics(self, tcp_target: Sequence[float], start: Sequence[float]) -> List[float]:
         """Joint angles (rad) that put the tcp at ``tcp_target`` (m, base_link), pointing down,

@@ -25,6 +25,9 @@ then    joint step toward the object (6)       rad     / joint_step_hint.joint_s
 then    the object's shape (5): sin and cos    -1..1   as given; sizes / observation.
         of k * (its yaw - the gripper's), its  and m   object_size_scale (only with
         extent along its own x, y, z                   ``observation.object_features``)
+then    the goal (4, a task with one: place):  m and   xy / relative_position_scale;
+        goal minus object (x, y), sin and cos  -1..1   sin, cos as given
+        of k * (the goal's yaw - the object's)
 ======  =====================================  ======  ==================================
 
 The previous actions make latency observable. Behind a driver that applies a command one or two
@@ -61,14 +64,31 @@ REACH_OBSERVATION_SIZE = 23  # without previous actions
 GRASP_OBSERVATION_SIZE = 24
 ARM_ACTION_SIZE = 6  # the arm components of the action (the seventh is the gripper)
 OBJECT_FEATURE_SIZE = 5  # sin, cos of the relative yaw by symmetry; the object's three extents
+GOAL_SIZE = 4  # goal minus object (x, y); sin, cos of the goal's yaw relative to the object's
+# What each task's observation carries beyond the arm and the object: (the object's lift, the
+# goal). The task classes (fr5_rl.tasks) declare the same as include_lift and include_goal; a
+# test keeps the two equal.
+TASK_BLOCKS = {"reach": (False, False), "grasp": (True, False), "place": (True, True)}
 
 
 def observation_size(task: str, obs_cfg: ObservationConfig) -> int:
-    """Length of the observation vector of ``task`` (``reach`` or ``grasp``) under ``obs_cfg``."""
-    base = GRASP_OBSERVATION_SIZE if task == "grasp" else REACH_OBSERVATION_SIZE
+    """Length of the observation vector of ``task`` (:data:`TASK_BLOCKS`) under ``obs_cfg``."""
+    include_lift, include_goal = TASK_BLOCKS[task]
+    base = GRASP_OBSERVATION_SIZE if include_lift else REACH_OBSERVATION_SIZE
     hint = ARM_ACTION_SIZE if obs_cfg.joint_step_hint is not None else 0
     shape = OBJECT_FEATURE_SIZE if obs_cfg.object_features else 0
-    return base + ARM_ACTION_SIZE * obs_cfg.previous_actions + hint + shape
+    return base + ARM_ACTION_SIZE * obs_cfg.previous_actions + hint + shape + (GOAL_SIZE if include_goal else 0)
+
+
+def goal_features(shape: ObjectShape, object_position: Sequence[float], object_quaternion: Sequence[float],
+                  goal: Sequence[float]) -> List[float]:
+    """The raw goal block: goal minus object (x, y, m, base_link), then ``(sin kΔ, cos kΔ)`` of the
+    goal's yaw relative to the object's (``(0, 0)`` for a cylinder).
+
+    :param goal: (x, y, yaw) of where the object is to stand (m, m, rad; base_link).
+    """
+    sine, cosine = shape.yaw_features(goal[2], yaw_of(object_quaternion))
+    return [goal[0] - object_position[0], goal[1] - object_position[1], sine, cosine]
 
 
 def object_features(shape: ObjectShape, object_quaternion: Sequence[float],
@@ -201,6 +221,7 @@ class ObservationInputs:
     object_lift: float = 0.0  # m above the resting height (grasp only)
     previous_actions: Sequence[float] = ()  # ActionHistory.values(): 6 * previous_actions values
     object_features: Sequence[float] = ()  # object_features(): 5 values with observation.object_features
+    goal: Sequence[float] = ()  # goal_features(): 4 values for a task with a goal
 
 
 class ObservationBuilder:
@@ -214,8 +235,9 @@ class ObservationBuilder:
     values as arguments (the environments' step path).
     """
 
-    def __init__(self, robot: RobotSpec, obs_cfg: ObservationConfig, include_lift: bool) -> None:
-        self.include_lift = include_lift
+    def __init__(self, robot: RobotSpec, obs_cfg: ObservationConfig, include_lift: bool,
+                 include_goal: bool = False) -> None:
+        self.include_lift, self.include_goal = include_lift, include_goal
         self.previous_actions = obs_cfg.previous_actions
         self._state_size = GRASP_OBSERVATION_SIZE if include_lift else REACH_OBSERVATION_SIZE
         self.size = self._state_size + ARM_ACTION_SIZE * self.previous_actions
@@ -227,6 +249,9 @@ class ObservationBuilder:
         self._object_size_gain = 1.0 / obs_cfg.object_size_scale
         if self.object_features:
             self.size += OBJECT_FEATURE_SIZE
+        self._goal_gain = 1.0 / obs_cfg.relative_position_scale
+        if include_goal:
+            self.size += GOAL_SIZE
         low = np.asarray(obs_cfg.tcp_position_low, dtype=np.float64)
         high = np.asarray(obs_cfg.tcp_position_high, dtype=np.float64)
         half_width = robot.max_opening_width / 2.0
@@ -248,7 +273,7 @@ class ObservationBuilder:
             inputs.joint_positions, inputs.joint_velocities, inputs.gripper_width,
             inputs.gripper_command_width, inputs.tcp_position, inputs.tcp_approach_axis,
             inputs.object_position, inputs.object_lift, inputs.previous_actions, out=out,
-            object_features=inputs.object_features,
+            object_features=inputs.object_features, goal=inputs.goal,
         )
 
     def build_from(self, joint_positions: Sequence[float], joint_velocities: Sequence[float],
@@ -257,13 +282,14 @@ class ObservationBuilder:
                    object_lift: float = 0.0, previous_actions: Sequence[float] = (),
                    out: Optional[np.ndarray] = None,
                    tcp_jacobian: Optional[Tuple[List[float], List[float], List[List[float]]]] = None,
-                   object_features: Sequence[float] = ()) -> np.ndarray:
+                   object_features: Sequence[float] = (), goal: Sequence[float] = ()) -> np.ndarray:
         """The observation from the fields of :class:`ObservationInputs`, given as arguments.
 
         ``tcp_jacobian``: the joint-step hint's kinematics of ``joint_positions``
         (:meth:`ForwardKinematics.tcp_jacobian`) where the caller computed them already.
         ``object_features``: :func:`object_features` of the object, with
-        ``observation.object_features`` (else empty).
+        ``observation.object_features`` (else empty). ``goal``: :func:`goal_features`, for a task
+        with a goal (else empty).
 
         Raises ValueError on NaN or inf, on something that is not a number, or on a sequence
         of the wrong length. Finite values outside their range are clipped to [-1, 1].
@@ -272,14 +298,16 @@ class ObservationBuilder:
             lengths_ok = (len(joint_positions) == 6 and len(joint_velocities) == 6 and len(tcp_position) == 3
                           and len(tcp_approach_axis) == 3 and len(object_position) == 3
                           and len(previous_actions) == ARM_ACTION_SIZE * self.previous_actions
-                          and len(object_features) == (OBJECT_FEATURE_SIZE if self.object_features else 0))
+                          and len(object_features) == (OBJECT_FEATURE_SIZE if self.object_features else 0)
+                          and len(goal) == (GOAL_SIZE if self.include_goal else 0))
         except TypeError:  # a scalar where a sequence belongs
             lengths_ok = False
         if not lengths_ok:
             raise ValueError("observation inputs need 6 joint positions, 6 velocities, 3-D tcp position, "
                              "approach axis and object position, "
                              f"{ARM_ACTION_SIZE * self.previous_actions} previous-action values and "
-                             f"{OBJECT_FEATURE_SIZE if self.object_features else 0} object-shape values")
+                             f"{OBJECT_FEATURE_SIZE if self.object_features else 0} object-shape values and "
+                             f"{GOAL_SIZE if self.include_goal else 0} goal values")
         try:
             tcp_x, tcp_y, tcp_z = tcp_position
             object_x, object_y, object_z = object_position
@@ -291,6 +319,8 @@ class ObservationBuilder:
             total = sum(raw) + sum(history) if history else sum(raw)
             if self.object_features:
                 total += sum(float(value) for value in object_features)
+            if self.include_goal:
+                total += sum(float(value) for value in goal)
             finite = math.isfinite(total)  # a single NaN or inf makes the sum non-finite
             values = []
             if finite:
@@ -306,6 +336,12 @@ class ObservationBuilder:
                     values.extend((sine, cosine))
                     gain = self._object_size_gain
                     values.extend(min(value * gain, 1.0) for value in extents)
+                if self.include_goal:
+                    goal_x, goal_y, sine, cosine = (float(value) for value in goal)
+                    gain = self._goal_gain
+                    values.extend(1.0 if value > 1.0 else (-1.0 if value < -1.0 else value)
+                                  for value in (goal_x * gain, goal_y * gain))
+                    values.extend((sine, cosine))
         except (TypeError, ValueError) as error:  # strings, None, arrays where numbers belong
             raise ValueError(f"observation inputs must be numbers and sequences of numbers: {error}") from None
         if not finite:

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 from ..config import ConfigError, robot_names
+from ..env_config import TASK_NAMES
 from ..deploy.bundle import META_FILE, ModelFilesError
 from ..training.evaluation import HELD_OUT_SEED_START
 from ..help_text import HelpFormatter, plain
@@ -26,7 +27,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="evaluate.py", description=plain(__doc__.split("\n\n")[0]),
                                      epilog=plain(__doc__.split("\n\n", 1)[1]), formatter_class=HelpFormatter)
     parser.add_argument("model_dir", type=Path, nargs="?", help="model directory (meta.json + the backend's files)")
-    parser.add_argument("--expert", choices=["reach", "grasp"], help="evaluate the scripted expert on this task")
+    parser.add_argument("--expert", choices=TASK_NAMES, help="evaluate the scripted expert on this task")
     parser.add_argument("--robot", choices=robot_names(), default=None,
                         help="the arm: the expert's (default fr5); a model trained for another arm refuses")
     parser.add_argument("--backend", choices=["torch", "onnx"], default="torch")

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import List, Optional, Set
 
 from ..config import ConfigError, robot_names
+from ..env_config import TASK_NAMES
 from ..deploy.bundle import ModelFilesError
 from ..training.run_settings import TrainRun, read_run_config
 from ..help_text import HelpFormatter, plain
@@ -27,7 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="train.py", description=plain(__doc__.split("\n\n")[0]),
                                      epilog=plain(__doc__.split("\n\n", 1)[1]),
                                      formatter_class=HelpFormatter)
-    parser.add_argument("--task", choices=["reach", "grasp"], default="reach")
+    parser.add_argument("--task", choices=TASK_NAMES, default="reach")
     parser.add_argument("--algo", choices=["ppo", "sac", "td3", "tqc"], default="ppo")
     parser.add_argument("--robot", choices=robot_names(), default=None,
                         help="the arm (config/robots/); default: the hyperparameter file's env.robot, else fr5")

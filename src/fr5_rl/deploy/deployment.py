@@ -23,7 +23,7 @@ from ..env_config import EnvConfig
 from ..motion_guard import MotionGuard, MotionGuardSettings, StartPhase
 from ..control import JointCommandShaper
 from ..kinematics import ForwardKinematics
-from ..observation import ActionHistory, ObservationBuilder, ObservationInputs
+from ..observation import TASK_BLOCKS, ActionHistory, ObservationBuilder, ObservationInputs
 from .bundle import ModelFilesError
 from .joint_state import ArmJointState, Reading
 from .policy import Policy
@@ -246,7 +246,11 @@ class DeploymentStep:
             # running the model without them would feed it an object it was not trained on.
             raise ModelFilesError("the policy observes the object's shape and size (observation.object_features), "
                                   "which the policy node does not take yet: deploy a model trained without them")
-        self.builder = ObservationBuilder(robot, env_cfg.observation, policy.task == "grasp")
+        include_lift, include_goal = TASK_BLOCKS[policy.task]
+        if include_goal:
+            raise ModelFilesError(f"a {policy.task} policy needs its goal, which the policy node does not take yet: "
+                                  "deploy a reach or grasp model")
+        self.builder = ObservationBuilder(robot, env_cfg.observation, include_lift)
         if self.builder.size != policy.observation_size:
             raise ModelFilesError(f"the policy takes {policy.observation_size} observation values; this fr5_rl "
                                   f"builds {self.builder.size} for {policy.task}: retrain it")

@@ -22,13 +22,13 @@ from typing import Any, Dict, List, Mapping, Optional
 import numpy as np
 
 from ..config import robot_config, robot_names
-from ..env_config import EnvConfig, load_env_config
+from ..env_config import TASK_NAMES, EnvConfig, load_env_config
 from ..control import ACTION_SIZE
 from ..observation import observation_size
 from .bundle import (META_FILE, MODEL_FILE, ONNX_FILE, STATS_FILE, ModelFilesError, algorithm_class,
                      check_files_present, check_sb3_zip, damaged, read_meta, resolve_model_dir)
 
-TASKS = ("reach", "grasp")
+TASKS = TASK_NAMES  # a model of any task loads (the policy node then says what it can run)
 # Settings a trained policy depends on: change one and the observation or the action means
 # something else than during training.
 DEPLOYMENT_SETTINGS = (("robot",), ("simulation", "control_dt"), ("action",), ("observation",))

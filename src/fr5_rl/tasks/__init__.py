@@ -9,7 +9,8 @@ for _module in pkgutil.iter_modules(__path__):
     importlib.import_module(f"{__name__}.{_module.name}")
 
 from .grasp import GraspTask  # noqa: E402  (imported above; named for callers)
+from .place import PlaceTask  # noqa: E402
 from .reach import ReachTask  # noqa: E402
 
 __all__ = ["TASKS", "EpisodeVerdict", "Task", "TaskOutcome", "TaskState", "held_as_the_camera_sees",
-           "task_state_from", "ReachTask", "GraspTask"]
+           "task_state_from", "ReachTask", "GraspTask", "PlaceTask"]

@@ -4,10 +4,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Dict, Mapping, NamedTuple, Optional, Sequence, Tuple, Type
+from typing import TYPE_CHECKING, Dict, Mapping, NamedTuple, Optional, Sequence, Tuple, Type
 
 from ..env_config import EnvConfig, RandomisationConfig
 from ..transforms import quaternion_z_axis
+
+if TYPE_CHECKING:
+    from ..draws import EpisodeDraws
+    from ..objects import ObjectShape
 
 
 @dataclass
@@ -135,7 +139,8 @@ class Task:
     """
 
     name = "task"
-    include_lift = False
+    include_lift = False  # the observation carries the object's lift
+    include_goal = False  # the observation carries the goal (a task with a goal draws one)
 
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)
@@ -161,6 +166,10 @@ class Task:
     def reset(self) -> None:
         """Start of an episode."""
         self._previous_potential = None
+
+    def start(self, draws: "EpisodeDraws", shape: "ObjectShape") -> None:
+        """The episode as drawn (its goal, if the task has one) and the object placed, after
+        :meth:`reset` and before the first state is judged."""
 
     def terms(self, state: TaskState) -> Dict[str, float]:  # pragma: no cover - abstract
         raise NotImplementedError

@@ -1,0 +1,133 @@
+"""The place task (issue #53): its goal draws, its success test, the scripted expert that solves
+it, and its goal-conditioned form for HER."""
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from fr5_rl.envs import FR5Env
+from fr5_rl.expert import ScriptedExpert
+from fr5_rl.goal_env import FR5PlaceGoalEnv
+from fr5_rl.objects import ObjectShape
+from fr5_rl.observation import GOAL_SIZE, TASK_BLOCKS
+from fr5_rl.tasks import TASKS
+
+
+@pytest.fixture(scope="module")
+def place():
+    env = FR5Env("place")
+    yield env
+    env.close()
+
+
+def run_expert(env, seed, max_steps=400):
+    expert = ScriptedExpert(env)
+    env.reset(seed=seed)
+    info = {}
+    for _ in range(max_steps):
+        _, _, terminated, truncated, info = env.step(expert.act())
+        if terminated or truncated:
+            break
+    return info
+
+
+def test_each_tasks_observation_blocks_are_the_observations_table():
+    for name, task in TASKS.items():
+        assert TASK_BLOCKS[name] == (task.include_lift, task.include_goal), name
+
+
+def test_the_goal_lies_in_the_placement_region_away_from_the_object(place):
+    cfg = place.cfg
+    for seed in range(40):
+        place.reset(seed=seed)
+        draws = place.episode.draws
+        goal_x, goal_y, goal_yaw = draws.goal
+        assert cfg.object.region_low[0] <= goal_x <= cfg.object.region_high[0]
+        assert cfg.object.region_low[1] <= goal_y <= cfg.object.region_high[1]
+        assert -math.pi <= goal_yaw <= math.pi
+        assert math.hypot(goal_x - draws.object_xy[0], goal_y - draws.object_xy[1]) >= cfg.place.min_goal_distance
+
+
+def test_the_other_tasks_draw_no_goal():
+    grasp = FR5Env("grasp")
+    try:
+        grasp.reset(seed=1)
+        assert grasp.episode.draws.goal is None
+    finally:
+        grasp.close()
+
+
+def test_the_scripted_expert_places_cylinders_on_seeds_it_was_not_tuned_on(place):
+    results = [run_expert(place, 5000 + k) for k in range(10)]
+    successes = sum(bool(info["is_success"]) for info in results)
+    assert successes >= 8, [info.get("failure") for info in results]
+
+
+def placed_state(place):
+    """A state the place task judges a success, from a successful expert episode."""
+    for seed in range(5000, 5010):
+        if run_expert(place, seed)["is_success"]:
+            return place.task_state()
+    pytest.fail("the expert placed nothing")
+
+
+def test_success_needs_every_condition_at_once(place):
+    task = place.task
+    state = placed_state(place)
+    assert task.judge(state, place.control_dt).success
+    goal_x, goal_y, _ = task.goal
+    x, y, z = state.object_position
+    wrong = {
+        "3 cm from the goal": {"object_position": (x + 0.03, y, z), "object_start_position": state.object_start_position},
+        "tilted 15 degrees": {"object_up_axis": (math.sin(math.radians(15)), 0.0, math.cos(math.radians(15)))},
+        "a finger still on it": {"fingers_object_contact": 1},
+        "the tcp 1 cm above its top": {"tcp_position": (state.tcp_position[0], state.tcp_position[1],
+                                                        z + task.shape.size[2] / 2 + 0.01)},
+    }
+    for why, change in wrong.items():
+        task._previous_object = state.object_position  # at rest
+        assert not task.judge(dataclasses.replace(state, **change), place.control_dt).success, why
+    task._previous_object = (x, y, z + 0.01)  # moving 0.5 m/s
+    assert not task.judge(state, place.control_dt).success, "still moving"
+
+
+def test_a_boxs_yaw_counts_modulo_its_symmetry(place):
+    task = place.task
+    state = placed_state(place)
+    goal_x, goal_y, _ = task.goal
+    square, rectangle = ObjectShape("box", (0.05, 0.05, 0.05)), ObjectShape("box", (0.06, 0.03, 0.05))
+    for shape, offset, success in ((square, 92.0, True), (square, 45.0, False), (rectangle, 92.0, False),
+                                   (rectangle, 185.0, True), (rectangle, 12.0, False)):
+        task.shape = shape
+        task.goal = (goal_x, goal_y, 0.0)
+        yaw = math.radians(offset)
+        quaternion = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+        task._previous_object = state.object_position
+        clear = (state.tcp_position[0], state.tcp_position[1], state.object_position[2] + 0.2)
+        judged = task.judge(dataclasses.replace(state, object_quaternion=quaternion, tcp_position=clear),
+                            place.control_dt)
+        assert judged.success == success, (shape.symmetry_order, offset)
+
+
+def test_the_goal_env_gives_the_place_observation_and_a_goal_only_reward():
+    env = FR5PlaceGoalEnv(config={"object": {"variety": {"enabled": True}}})
+    try:
+        observation, _ = env.reset(seed=11)
+        flat, _ = env.env.reset(seed=11)
+        np.testing.assert_array_equal(observation["observation"], flat[:-GOAL_SIZE])
+        achieved, desired = observation["achieved_goal"], observation["desired_goal"]
+        assert env.compute_reward(achieved, desired, {}) == -1.0  # the goal is >= 10 cm away
+        assert env.compute_reward(desired, desired, {}) == 0.0
+        batch = np.stack([desired, achieved, desired])
+        np.testing.assert_array_equal(env.compute_reward(batch, np.stack([desired] * 3), [{}] * 3), [0.0, -1.0, 0.0])
+        # A square box 78 degrees off its goal yaw is 12 off by its symmetry: too far; 96 is 6 off.
+        square_goal = np.array([0.0, 0.0, 0.0, 1.0, 1.0], dtype=np.float32)
+        for degrees, reward in ((78.0, -1.0), (96.0, 0.0), (0.0, 0.0)):
+            angle = 4 * math.radians(degrees)
+            achieved_yaw = np.array([0.0, 0.0, math.sin(angle), math.cos(angle), 1.0], dtype=np.float32)
+            assert env.compute_reward(achieved_yaw, square_goal, {}) == reward, degrees
+        cylinder_goal = np.array([0.0, 0.0, 0.0, 0.0, 0.0], dtype=np.float32)
+        assert env.compute_reward(np.array([0.01, 0.0, 0.0, 0.0, 0.0], dtype=np.float32), cylinder_goal, {}) == 0.0
+    finally:
+        env.close()
