@@ -6,6 +6,8 @@ import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Dict, Mapping, NamedTuple, Optional, Sequence, Tuple, Type
 
+import numpy as np
+
 from ..env_config import EnvConfig, RandomisationConfig
 from ..transforms import quaternion_z_axis
 
@@ -144,6 +146,8 @@ class Task:
 
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)
+        if "name" not in cls.__dict__:
+            return  # a base for tasks (ObjectTask), not a task
         if cls.name in TASKS and TASKS[cls.name] is not cls:
             raise TypeError(f"two tasks are named {cls.name!r}: {TASKS[cls.name].__name__} and {cls.__name__}")
         TASKS[cls.name] = cls
@@ -233,3 +237,33 @@ class Task:
     def gripper_term(self, state: TaskState, wanted_width: float) -> float:
         """-|measured width - wanted width| / max opening width."""
         return -abs(state.gripper_width - wanted_width) / self.max_opening_width
+
+
+class ObjectTask(Task):
+    """A task that handles the object: besides the common failures, it fails when the object is
+    knocked over or pushed out of reach.
+
+    :param knocked_over_angle_deg: tilt beyond which the object counts as knocked over.
+    :param out_of_reach_margin: m beyond the placement region where the object is out of reach.
+    """
+
+    def __init__(self, cfg: EnvConfig, max_opening_width: float, knocked_over_angle_deg: float,
+                 out_of_reach_margin: float) -> None:
+        super().__init__(cfg, max_opening_width)
+        self.max_tilt_cos = float(np.cos(np.deg2rad(knocked_over_angle_deg)))
+        self.region_low = [v - out_of_reach_margin for v in cfg.object.region_low]
+        self.region_high = [v + out_of_reach_margin for v in cfg.object.region_high]
+
+    def handling_failure(self, state: TaskState) -> Optional[str]:
+        """Why the episode failed (a collision, the workspace left, the object knocked over or out
+        of reach), or None."""
+        failure = self.common_failure(state)
+        if failure is not None:
+            return failure
+        if float(state.object_up_axis[2]) < self.max_tilt_cos:
+            return "object_knocked_over"
+        x, y = state.object_position[0], state.object_position[1]
+        (x_low, y_low), (x_high, y_high) = self.region_low, self.region_high
+        if not (x_low <= x <= x_high and y_low <= y <= y_high):
+            return "object_out_of_reach"
+        return None

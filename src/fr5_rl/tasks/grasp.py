@@ -4,13 +4,12 @@ from __future__ import annotations
 import math
 from typing import Dict
 
-import numpy as np
 
 from ..env_config import EnvConfig
-from .base import Task, TaskOutcome, TaskState
+from .base import ObjectTask, TaskOutcome, TaskState
 
 
-class GraspTask(Task):
+class GraspTask(ObjectTask):
     """Success: the object's centre stays at least ``lift_height`` above its start for
     ``hold_time`` seconds. Failure: any robot contact with the table, the arm or palm hitting
     the object, the object knocked over (tilt past ``knocked_over_angle_deg``) or pushed off
@@ -21,15 +20,10 @@ class GraspTask(Task):
     include_lift = True
 
     def __init__(self, cfg: EnvConfig, max_opening_width: float) -> None:
-        super().__init__(cfg, max_opening_width)
         grasp = cfg.grasp
+        super().__init__(cfg, max_opening_width, grasp.knocked_over_angle_deg, grasp.out_of_reach_margin)
         self.lift_height = grasp.lift_height
         self.hold_time = grasp.hold_time
-        self.max_tilt_cos = float(np.cos(np.deg2rad(grasp.knocked_over_angle_deg)))
-        # Pushed beyond the placement region by more than the margin: out of reach.
-        margin = grasp.out_of_reach_margin
-        self.region_low = [v - margin for v in cfg.object.region_low]
-        self.region_high = [v + margin for v in cfg.object.region_high]
         # Close when the tcp is this close to the grasp point (m): the shaping's cue.
         self.close_distance = grasp.close_distance
         self.grasp_point_height = grasp.grasp_point_height
@@ -65,15 +59,9 @@ class GraspTask(Task):
 
     def judge(self, state: TaskState, control_dt: float) -> TaskOutcome:
         terms = self.terms(state)
-        failure = self.common_failure(state)
+        failure = self.handling_failure(state)
         if failure is not None:
             return TaskOutcome(False, failure, terms)
-        if float(state.object_up_axis[2]) < self.max_tilt_cos:
-            return TaskOutcome(False, "object_knocked_over", terms)
-        x, y = state.object_position[0], state.object_position[1]
-        (x_low, y_low), (x_high, y_high) = self.region_low, self.region_high
-        if not (x_low <= x <= x_high and y_low <= y <= y_high):
-            return TaskOutcome(False, "object_out_of_reach", terms)
         if self.lift(state) >= self.lift_height:
             self.lifted_time += control_dt
         else:

@@ -7,10 +7,10 @@ from typing import Dict, Optional, Sequence, Tuple
 from ..draws import EpisodeDraws
 from ..env_config import EnvConfig
 from ..objects import ObjectShape, yaw_of
-from .base import Task, TaskOutcome, TaskState
+from .base import ObjectTask, TaskOutcome, TaskState
 
 
-class PlaceTask(Task):
+class PlaceTask(ObjectTask):
     """Set the object down at a goal (x, y and, for a box, yaw) and let go of it.
 
     Success (all at once, within ``place.max_steps``): the object within
@@ -31,15 +31,11 @@ class PlaceTask(Task):
     include_goal = True
 
     def __init__(self, cfg: EnvConfig, max_opening_width: float) -> None:
-        super().__init__(cfg, max_opening_width)
         place = cfg.place
+        super().__init__(cfg, max_opening_width, place.knocked_over_angle_deg, place.out_of_reach_margin)
         self.settings = place
-        self.max_tilt_cos = math.cos(math.radians(place.knocked_over_angle_deg))
         self.upright_cos = math.cos(math.radians(place.upright_tolerance_deg))
         self.yaw_tolerance = math.radians(place.yaw_tolerance_deg)
-        margin = place.out_of_reach_margin
-        self.region_low = [v - margin for v in cfg.object.region_low]
-        self.region_high = [v + margin for v in cfg.object.region_high]
         self.goal: Tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.shape: Optional[ObjectShape] = None
         self._previous_object: Optional[Sequence[float]] = None
@@ -105,14 +101,9 @@ class PlaceTask(Task):
             self.object_speed = math.dist(position, self._previous_object) / control_dt
         self._previous_object = position
         terms = self.terms(state)
-        failure = self.common_failure(state)
+        failure = self.handling_failure(state)
         if failure is not None:
             return TaskOutcome(False, failure, terms)
-        if float(state.object_up_axis[2]) < self.max_tilt_cos:
-            return TaskOutcome(False, "object_knocked_over", terms)
-        (x_low, y_low), (x_high, y_high) = self.region_low, self.region_high
-        if not (x_low <= position[0] <= x_high and y_low <= position[1] <= y_high):
-            return TaskOutcome(False, "object_out_of_reach", terms)
         place = self.settings
         success = (self.goal_distance(state) <= place.position_tolerance
                    and self.yaw_error(state) <= self.yaw_tolerance
