@@ -131,3 +131,16 @@ def test_the_goal_env_gives_the_place_observation_and_a_goal_only_reward():
         assert env.compute_reward(np.array([0.01, 0.0, 0.0, 0.0, 0.0], dtype=np.float32), cylinder_goal, {}) == 0.0
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("task, at_least", [("grasp", 9), ("place", 7)])
+def test_the_expert_grasps_boxes_at_any_yaw_and_places_them_at_the_goals_yaw(task, at_least):
+    """Boxes at random yaws: the expert turns the gripper to close across the narrower side and,
+    placing, turns the box to the goal's yaw by its symmetry (without the turn: place fails).
+    Held-out seeds; 10/10 and 8/10 measured."""
+    env = FR5Env(task, config={"object": {"variety": {"enabled": True, "kinds": ["box"]}}})
+    try:
+        results = [run_expert(env, seed, env.task.max_steps) for seed in range(7000, 7010)]
+        assert sum(bool(info["is_success"]) for info in results) >= at_least, [i.get("failure") for i in results]
+    finally:
+        env.close()

@@ -13,6 +13,7 @@ import numpy as np
 
 from .envs import FR5Env
 from .kinematics import InverseKinematics
+from .objects import yaw_of
 
 
 class ScriptedExpert:
@@ -26,6 +27,9 @@ class ScriptedExpert:
     hover_height = 0.10  # m above the object centre before descending
     lift_clearance = 0.10  # m the expert lifts (the task needs lift_height)
     grasp_height_offset = 0.015  # m above the object centre where the fingers close
+    # ... but no lower than this below a tall object's top: the pads reach this far down before
+    # the palm touches the top.
+    finger_reach = 0.03
     align_tolerance = 0.01  # m horizontal error under which the expert descends
     at_grasp_tolerance = 0.008  # m from the grasp point under which it closes
     # Cartesian speed per phase (m per 20 ms control step): fast in free space, slow near the
@@ -63,7 +67,8 @@ class ScriptedExpert:
         tcp_x, tcp_y, tcp_z = state.tcp_position
         object_x, object_y, object_z = state.object_position
         grasp = env.task.name in ("grasp", "place")
-        grasp_z = object_z + (self.grasp_height_offset if grasp else 0.0)
+        grasp_offset = self._grasp_offset() if grasp else 0.0
+        grasp_z = object_z + grasp_offset
         dx, dy, dz = object_x - tcp_x, object_y - tcp_y, grasp_z - tcp_z  # to the grasp point
         horizontal_error = math.sqrt(dx * dx + dy * dy)
         held = grasp and state.fingers_object_contact == 2 and \
@@ -73,7 +78,7 @@ class ScriptedExpert:
             phase, target = placing
         elif held:
             phase = "lift"
-            target = (object_x, object_y, state.object_start_position[2] + self.grasp_height_offset + self.lift_clearance)
+            target = (object_x, object_y, state.object_start_position[2] + grasp_offset + self.lift_clearance)
         elif grasp and math.sqrt(dx * dx + dy * dy + dz * dz) < self.at_grasp_tolerance:
             phase, target = "close", (object_x, object_y, grasp_z)
         elif horizontal_error < self.align_tolerance + 0.5 * max(tcp_z - grasp_z, 0.0):
@@ -94,7 +99,7 @@ class ScriptedExpert:
         if distance > step:
             fraction = step / distance
             target = (tcp_x + offset_x * fraction, tcp_y + offset_y * fraction, tcp_z + offset_z * fraction)
-        joint_targets = self._inverse_kinematics(target, q)
+        joint_targets = self._inverse_kinematics(target, q, self._rotation(state, phase, held))
         max_step = self._max_step
         delta = [(wanted - angle) / max_step for wanted, angle in zip(joint_targets, q)]
         # Scale the whole joint step (not per joint) so the motion keeps its direction.
@@ -102,10 +107,17 @@ class ScriptedExpert:
         gripper = -1.0 if phase in ("close", "lift", "carry", "lower") else 1.0
         return np.array([value / scale for value in delta] + [gripper], dtype=np.float32)
 
+    def _grasp_offset(self) -> float:
+        """m above the object's centre where the fingers close: ``grasp_height_offset``, or
+        higher on a tall object, ``finger_reach`` below its top."""
+        shape = self.env.episode.plant.object_shape
+        half_height = shape.size[2] / 2.0 if shape is not None else 0.0
+        return max(self.grasp_height_offset, half_height - self.finger_reach)
+
     def _place_phase(self, state, held: bool):
         """The place task's phases after the grasp, or None while grasping: carry the object above
-        the goal, lower it onto the table, let go, and rise clear of it. Cylinders only: the
-        expert keeps the gripper's yaw, so it cannot turn a box to a goal yaw."""
+        the goal (turning a box to the goal's yaw, :meth:`_rotation`), lower it onto the table,
+        let go, and rise clear of it."""
         task = self.env.task
         goal_x, goal_y, _ = task.goal
         object_x, object_y, object_z = state.object_position
@@ -113,7 +125,7 @@ class ScriptedExpert:
         to_goal = math.hypot(goal_x - object_x, goal_y - object_y)
         tcp_x, tcp_y, tcp_z = state.tcp_position
         offset_x, offset_y = tcp_x - object_x, tcp_y - object_y  # the object's place in the hand
-        resting_grasp_z = start_z + self.grasp_height_offset
+        resting_grasp_z = start_z + self._grasp_offset()
         if held:
             hand_over_goal = (goal_x + offset_x, goal_y + offset_y)
             if to_goal > self.place_funnel:
@@ -132,9 +144,42 @@ class ScriptedExpert:
             return "retreat", (tcp_x, tcp_y, object_z + self.hover_height)
         return None
 
-    def _inverse_kinematics(self, tcp_target: Sequence[float], start: Sequence[float]) -> List[float]:
-        """Joint angles (rad) that put the tcp at ``tcp_target`` (m, base_link), pointing down,
-        found from ``start`` (the measured joints, rad); the last iterate if not converged (the
-        action then scales it to one step all the same)."""
-        joints, _ = self._inverse.solve(start, tcp_target, self._down_rotation)
+    def _inverse_kinematics(self, tcp_target: Sequence[float], start: Sequence[float],
+                            rotation: Sequence[float]) -> List[float]:
+        """Joint angles (rad) that put the tcp at ``tcp_target`` (m, base_link) with ``rotation``
+        (9 floats, row-major), found from ``start`` (the measured joints, rad); the last iterate
+        if not converged (the action then scales it to one step all the same)."""
+        joints, _ = self._inverse.solve(start, tcp_target, rotation)
         return joints
+
+    def _rotation(self, state, phase: str, held: bool) -> Sequence[float]:
+        """The tcp rotation to aim for: pointing down, turned about the vertical so the fingers
+        close across a box's narrower side (its own x along the gripper's x), and, carrying it
+        in the place task, so that the box stands at the goal's yaw. A cylinder needs no turn:
+        home's yaw."""
+        shape = self.env.episode.plant.object_shape
+        order = shape.symmetry_order if shape is not None else 0
+        if order == 0:
+            return self._down_rotation
+        period = 2.0 * math.pi / order
+        home_yaw = math.atan2(self._down_rotation[3], self._down_rotation[0])
+        object_yaw = yaw_of(state.object_quaternion)
+        if held and self.env.task.name == "place" and phase in ("carry", "lower"):
+            # The object turns with the hand: turn the hand by the object's yaw error to the goal.
+            current = self.env.kinematics.tcp_pose(state.joint_positions)[1]
+            tcp_yaw = math.atan2(current[1, 0], current[0, 0])
+            error = (self.env.task.goal[2] - object_yaw) % period
+            error = error - period if error > period / 2.0 else error
+            wanted = tcp_yaw + error
+        elif phase in ("hover", "descend", "close", "lift"):
+            wanted = object_yaw + period * round((home_yaw - object_yaw) / period)
+        else:  # letting go and rising clear: keep the hand's yaw
+            current = self.env.kinematics.tcp_pose(state.joint_positions)[1]
+            wanted = math.atan2(current[1, 0], current[0, 0])
+        turn = wanted - home_yaw
+        cosine, sine = math.cos(turn), math.sin(turn)
+        r = self._down_rotation
+        # Rz(turn) @ R_home, row-major.
+        return [cosine * r[0] - sine * r[3], cosine * r[1] - sine * r[4], cosine * r[2] - sine * r[5],
+                sine * r[0] + cosine * r[3], sine * r[1] + cosine * r[4], sine * r[2] + cosine * r[5],
+                r[6], r[7], r[8]]
