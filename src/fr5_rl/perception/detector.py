@@ -84,6 +84,31 @@ class Refusal:
         return f"{self.reason.value}" + (f": {self.detail}" if self.detail else "")
 
 
+# A face's farthest point, squared, over its radial variance: 2 for a disc, 3 for a rectangle of
+# any proportions. Between the two: a box's top above this.
+BOX_CORNER_RATIO = 2.5
+
+
+def face_shape(dx: np.ndarray, dy: np.ndarray, weights: np.ndarray, farthest_squared: float,
+               spread: float) -> Tuple[str, float, Tuple[float, float]]:
+    """A top face's kind, yaw and extents from its points about their centre (m, table frame).
+
+    :param weights: each point's share of the face's area (summing to 1).
+    :param farthest_squared: the largest squared distance of a point from the centre (m^2).
+    :param spread: the weighted mean squared distance (m^2).
+    :return: ``(kind, yaw, (longer, shorter))``: see :class:`Detection`.
+    """
+    if spread <= 0.0 or farthest_squared / spread < BOX_CORNER_RATIO:
+        diameter = 2.0 * math.sqrt(2.0 * max(spread, 0.0))
+        return "cylinder", 0.0, (diameter, diameter)
+    xx, yy, xy = float(weights @ (dx * dx)), float(weights @ (dy * dy)), float(weights @ (dx * dy))
+    yaw = 0.5 * math.atan2(2.0 * xy, xx - yy)  # the major axis
+    half_trace, half_gap = 0.5 * (xx + yy), math.hypot(0.5 * (xx - yy), xy)
+    major, minor = half_trace + half_gap, max(half_trace - half_gap, 0.0)
+    # A uniform rectangle's variance along a side of length L is L^2 / 12.
+    return "box", yaw, (math.sqrt(12.0 * major), math.sqrt(12.0 * minor))
+
+
 @dataclass(frozen=True)
 class Detection:
     """The object found in one frame.
@@ -96,6 +121,11 @@ class Detection:
     :param pixels: pixels the object covers.
     :param size: the top face's width (m) in the table plane (its equivalent diameter): what the
         fingers close to when they hold it.
+    :param kind: ``box`` or ``cylinder``, from the top face's shape (a rectangle's corners lie
+        farther out than a disc's edge, for the same spread).
+    :param yaw: rad, in the table frame: a box's longer top side (its own x; modulo pi, modulo
+        pi / 2 for a square top); 0 for a cylinder.
+    :param extents: (longer, shorter) side of a box's top, or a cylinder's diameter twice (m).
     """
 
     position: Tuple[float, float, float]
@@ -105,6 +135,9 @@ class Detection:
     radius_px: float
     pixels: int
     size: float = 0.0
+    kind: str = "cylinder"
+    yaw: float = 0.0
+    extents: Tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -307,8 +340,10 @@ class ObjectDetector:
         cx = float(weights @ face_x)
         cy = float(weights @ face_y)
         # Equivalent diameter from the face's spread: a disc's radial variance is r^2 / 2.
-        spread = float(weights @ ((face_x - cx) ** 2 + (face_y - cy) ** 2))
+        radial = (face_x - cx) ** 2 + (face_y - cy) ** 2
+        spread = float(weights @ radial)
         size = 2.0 * math.sqrt(2.0 * spread)
+        kind, yaw, extents = face_shape(face_x - cx, face_y - cy, weights, float(radial.max()), spread)
         half = 0.5 * (s.object_height if s.object_height > 0.0 else top_height)
         centre_table = np.array([cx, cy, table_height + top_height - half, 1.0])
         centre_optical = np.linalg.inv(np.asarray(table_from_optical, dtype=np.float64)) @ centre_table
@@ -318,7 +353,7 @@ class ObjectDetector:
         rows, cols = np.divmod(index, w_img)
         radius = 0.5 * max(rows.max() - rows.min(), cols.max() - cols.min()) + 1.0
         return Detection(tuple(float(c) for c in centre_optical[:3]), tuple(float(c) for c in centre_table[:3]),
-                         top_height, (float(u), float(v)), float(radius), int(index.size), size)
+                         top_height, (float(u), float(v)), float(radius), int(index.size), size, kind, yaw, extents)
 
     def _hidden_by_robot(self, piece: np.ndarray, robot: np.ndarray, depth: np.ndarray) -> bool:
         """Whether the robot, where it borders ``piece`` in the image, is not clearly *behind*
