@@ -145,11 +145,12 @@ class ScriptedExpert:
         return None
 
     def _inverse_kinematics(self, tcp_target: Sequence[float], start: Sequence[float],
-                            rotation: Sequence[float]) -> List[float]:
+                            rotation: Optional[Sequence[float]] = None) -> List[float]:
         """Joint angles (rad) that put the tcp at ``tcp_target`` (m, base_link) with ``rotation``
-        (9 floats, row-major), found from ``start`` (the measured joints, rad); the last iterate
-        if not converged (the action then scales it to one step all the same)."""
-        joints, _ = self._inverse.solve(start, tcp_target, rotation)
+        (9 floats, row-major; None: pointing down at home's yaw), found from ``start`` (the
+        measured joints, rad); the last iterate if not converged (the action then scales it to one
+        step all the same)."""
+        joints, _ = self._inverse.solve(start, tcp_target, self._down_rotation if rotation is None else rotation)
         return joints
 
     def _rotation(self, state, phase: str, held: bool) -> Sequence[float]:
