@@ -143,3 +143,19 @@ def test_late_joint_states_repeat_in_some_periods_unless_the_node_waits_for_a_ne
             env.close()
     assert repeated[0.0] > 0.05  # 16.6 % with models/reach of 2026-11
     assert repeated[0.015] < 0.25 * repeated[0.0]  # 2.1 %: states later than the wait still repeat
+
+
+@pytest.mark.integration
+def test_the_timing_bench_runs_and_writes_its_result(tmp_path):
+    """tools/bench/timing.py end to end, one episode: the figure and its JSON (with the profile's
+    simulator settings) come out."""
+    import json
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, str(package_root() / "tools" / "bench" / "timing.py"), "--model",
+                          "models/reach", "--profile", "fairino", "--episodes", "1", "--seed", "900000",
+                          "--results", str(tmp_path), "--name", "one"], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    result = json.loads((tmp_path / "one.json").read_text())
+    assert result["episodes"] == 1 and result["simulator"]["servo_rate"] == 125.0

@@ -163,7 +163,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     verdicts = {"success_rate": verdict(rate, TARGET_SUCCESS, AT_LEAST)}
     name = args.name or f"timing_{task}_{args.profile}"
     out = args.results / f"{name}.json"
-    write_result(out, {"model": relative_path(model_dir), "profile": args.profile, "simulator": params,
+    write_result(out, {"model": relative_path(model_dir), "profile": args.profile, "simulator": dataclasses.asdict(params),
                        "chain": chain.__dict__,
                        "compute_ms": None if compute_samples is not None else args.compute_ms,
                        "compute_from": None if args.compute_from is None else relative_path(args.compute_from),
