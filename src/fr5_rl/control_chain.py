@@ -30,6 +30,8 @@ from .sim.servo import FirstOrderResponse
 from .transforms import quaternion_z_axis
 
 
+_new_tuple = tuple.__new__
+
 class Sensed(NamedTuple):
     """What the policy is given of one moment, as the chain delivers it.
 
@@ -314,7 +316,8 @@ class ControlChain:
                 tcp_position, tcp_axis = self.kinematics.tcp_position_and_axis(q)
         if self._velocities_from_positions:
             velocities = self._estimate_velocities(q, sample_time)
-        return Sensed(q, velocities, width, tcp_position, tcp_axis, object_position, tcp_jacobian)
+        # tuple.__new__: the named tuple without its Python-level constructor (the step path).
+        return _new_tuple(Sensed, (q, velocities, width, tcp_position, tcp_axis, object_position, tcp_jacobian))
 
     def _estimate_velocities(self, positions: Sequence[float], sample_time: float) -> List[float]:
         """Velocities from this sample and the last, as the policy node estimates them behind a

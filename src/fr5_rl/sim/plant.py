@@ -21,6 +21,8 @@ from .world import PyBulletWorld
 __all__ = ["Contacts", "JointStates", "Measurement", "Plant", "Pose", "SceneDescription"]
 
 
+_new_tuple = tuple.__new__
+
 class JointStates(NamedTuple):
     """Measured state of the eight joints, by name, as ``sensor_msgs/JointState`` carries it.
 
@@ -201,12 +203,12 @@ class Plant:
                     pads.add(contact[3])
                 else:
                     arm_object_contact = True
-        return Contacts(table_contact, arm_object_contact, len(pads))
+        return _new_tuple(Contacts, (table_contact, arm_object_contact, len(pads)))  # no Python-level constructor
 
     def object_pose(self) -> Pose:
         """The object's centre and orientation in base_link (ground truth)."""
         position, quaternion = self.world.object_pose()
-        return Pose(position, quaternion, self.spec.base_frame)
+        return _new_tuple(Pose, (position, quaternion, self.spec.base_frame))
 
     def joint_positions(self) -> np.ndarray:
         """Measured arm joint angles (rad), controller order."""

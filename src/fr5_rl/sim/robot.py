@@ -66,6 +66,8 @@ def cap_joint_speeds(body: int, robot: RobotSpec, client: int) -> None:
     p.changeDynamics(body, -1, maxJointVelocity=float(max(robot.velocity_limits)), physicsClientId=client)
 
 
+_new_tuple = tuple.__new__
+
 class Measurement(NamedTuple):
     """One read of the arm (two simulator queries, plain floats: the step path).
 
@@ -209,7 +211,8 @@ class FR5Robot:
         """
         positions, velocities, width = self.joint_lists()
         link = p.getLinkState(self.body, self.tcp_link, computeForwardKinematics=1, physicsClientId=self.client)
-        return Measurement(positions, velocities, width, link[4], link[5])
+        # tuple.__new__: the named tuple without its Python-level constructor (the step path).
+        return _new_tuple(Measurement, (positions, velocities, width, link[4], link[5]))
 
     def joint_lists(self) -> Tuple[List[float], List[float], float]:
         """Measured arm positions (rad), velocities (rad/s), controller order, and gripper
