@@ -53,7 +53,6 @@ class Episode:
         self.draws: Optional[EpisodeDraws] = None
         self.steps = 0  # control periods judged since the reset
         self.state: Optional[TaskState] = None  # the last one measured
-        self.rng: Optional[np.random.Generator] = None  # the generator of the episode begun with start()
 
     @classmethod
     def build(cls, task: str, robot: Optional[str] = None, overrides: Optional[Mapping[str, Any]] = None,
@@ -66,8 +65,7 @@ class Episode:
     def start(self, seed: int, options: Optional[Mapping[str, Any]] = None) -> Tuple[TaskState, np.ndarray]:
         """:meth:`reset` from ``seed``'s own generator: the episode gym's ``reset(seed=seed)`` makes
         (the same stream as gymnasium's seeding)."""
-        self.rng = np.random.default_rng(int(seed))
-        return self.reset(self.rng, options)
+        return self.reset(np.random.default_rng(int(seed)), options)
 
     # ------------------------------------------------------------------ the episode's start
     def reset(self, rng: np.random.Generator, options: Optional[Mapping[str, Any]] = None) -> Tuple[TaskState, np.ndarray]:

@@ -55,16 +55,6 @@ class FR5PlaceGoalEnv(gym.Env):
             "achieved_goal": goal_space, "desired_goal": goal_space})
         self.action_space = self.env.action_space
 
-    @property
-    def spec(self):
-        return self.env.spec if self._spec is None else self._spec
-
-    @spec.setter
-    def spec(self, value) -> None:
-        self._spec = value
-
-    _spec = None
-
     def _goal_vector(self, x: float, y: float, yaw: float) -> np.ndarray:
         order = self.env.episode.plant.object_shape.symmetry_order
         sine, cosine = (math.sin(order * yaw), math.cos(order * yaw)) if order else (0.0, 0.0)
