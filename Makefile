@@ -17,7 +17,7 @@ help:
 	@echo "make lint   - set up, then catkin_lint, ruff (config: ruff.toml), and the URDF, launch-file and command-line checks"
 	@echo "make bench  - set up, then run the benchmarks; figures printed and written to bench/results/"
 	@echo "make bench-ray - set up, then the Ray Tune bench (1 vs 2 nodes, ASHA vs full); BENCH_ARGS=--quick"
-	@echo "make train  - set up, then train (TASK=reach|grasp ALGO=ppo|sac|td3|tqc ROBOT=fr3|fr5|fr10|fr16|fr20|fr30)"
+	@echo "make train  - set up, then train (TASK=reach|grasp|place ALGO=ppo|sac|td3|tqc ROBOT=fr3|fr5|fr10|fr16|fr20|fr30)"
 	@echo "make meshes - set up, then regenerate urdf/ and meshes/ for every arm from config/robots/ and config/gripper.yaml"
 	@echo "make setup  - only the set-up"
 

@@ -73,7 +73,7 @@ def mutated(name: str, change):
     (PolicyNodeParams, "policy_node", lambda d: d.update(backend="tensorrt"), "'backend' must be torch or onnx"),
     (PolicyNodeParams, "policy_node", lambda d: d.pop("target_timeout"), "missing key 'target_timeout'"),
     (SimNodeParams, "sim_node", lambda d: d.update(seed=1.5), "'seed' must be an integer"),
-    (SimNodeParams, "sim_node", lambda d: d.update(task="stack"), "'task' must be reach, grasp or"),
+    (SimNodeParams, "sim_node", lambda d: d.update(task="stack"), "'task' must be one of reach, grasp, place or"),
     (StaticTransforms, "static_transforms", lambda d: d["transforms"][0].update(xyz=[0, 0]), "transforms[0]"),
     (StaticTransforms, "static_transforms", lambda d: d["transforms"][1].update(parnet="x"), "unknown key 'transforms[1].parnet'"),
     (StaticTransforms, "static_transforms", lambda d: d["transforms"][0].update(rpy=[0, "a", 0]), "'transforms[0].rpy[1]' must be a number"),

@@ -378,11 +378,10 @@ def run_beside_the_environment(task: str, overrides, actions, size: int, seed: i
     """Feed a DeploymentStep the environment's state period by period while the environment
     steps ``actions``; assert that the node's observation is the environment's every period.
     Returns the environment's observations (the first from the reset, then after each action)."""
-    import gymnasium as gym
+    from fr5_rl.envs import FR5Env
+    from fr5_rl.objects import yaw_of
 
-    import fr5_rl  # noqa: F401  (registers the environments)
-
-    env = gym.make({"reach": "FR5Reach-v0", "grasp": "FR5Grasp-v0"}[task], config=overrides).unwrapped
+    env = FR5Env(task, config=overrides)
     policy = ScriptedPolicy(actions, task, size)
     step = DeploymentStep(policy, ROBOT, load_env_config(overrides), joint_state_timeout=0.1, target_timeout=0.5)
     observations = [env.reset(seed=seed)[0]]
@@ -390,7 +389,11 @@ def run_beside_the_environment(task: str, overrides, actions, size: int, seed: i
         state = env.task_state()
         joints = Reading(ArmJointState(np.asarray(state.joint_positions), np.asarray(state.joint_velocities),
                                        state.gripper_width), NOW)
-        command = step(StepInputs(NOW, joints, Reading(tuple(state.object_position), NOW)))
+        # What the node takes from tf: the object's position and yaw, its shape, the goal.
+        target = Reading((*state.object_position, yaw_of(state.object_quaternion)), NOW)
+        shape = Reading(env.episode.plant.object_shape, NOW)
+        goal = Reading(env.episode.draws.goal, NOW) if env.episode.draws.goal is not None else None
+        command = step(StepInputs(NOW, joints, target, object_shape=shape, goal=goal))
         assert isinstance(command, Command), command
         np.testing.assert_allclose(policy.seen[period], observations[-1], atol=1e-6, err_msg=f"period {period}")
         observations.append(env.step(action)[0])
@@ -524,3 +527,53 @@ def test_a_period_waits_only_for_a_state_no_period_used():
         FreshStateWait(-0.001)
     with pytest.raises(ValueError, match=">= 0"):
         FreshStateWait(float("nan"))
+
+
+# ----------------------------------------------------------------------------- pick and place
+PLACE_CFG = load_env_config({"object": {"variety": {"enabled": True}}, "observation": {"object_features": True}})
+
+
+def place_step() -> DeploymentStep:
+    from fr5_rl.observation import observation_size
+
+    policy = ScriptedPolicy([[0.0] * 7] * 10, "place", observation_size("place", PLACE_CFG.observation))
+    return DeploymentStep(policy, ROBOT, PLACE_CFG, joint_state_timeout=0.1, target_timeout=0.5)
+
+
+def place_inputs(target=(*TARGET, 0.3), shape="box", goal=(-0.6, -0.1, 1.0)) -> StepInputs:
+    from fr5_rl.objects import ObjectShape
+
+    shape = Reading(ObjectShape("box", (0.06, 0.04, 0.05)), NOW) if shape == "box" else shape
+    goal = Reading(goal, NOW) if isinstance(goal, tuple) else goal
+    return StepInputs(NOW, joint_reading(), Reading(target, NOW), object_shape=shape, goal=goal)
+
+
+@pytest.mark.parametrize("change, reason, words", [
+    ({"shape": None}, HoldReason.NO_OBJECT_SHAPE, "shape"),
+    ({"shape": Reading(None, NOW, "a SolidPrimitive of type SPHERE")}, HoldReason.OBJECT_SHAPE_INVALID, "SPHERE"),
+    ({"goal": None}, HoldReason.NO_GOAL, "goal"),
+    ({"goal": Reading(None, NOW, "no transform conveyor -> base_link")}, HoldReason.GOAL_INVALID, "conveyor"),
+    ({"goal": (-0.6, math.nan, 0.0)}, HoldReason.GOAL_INVALID, "finite"),
+    ({"goal": (-0.6, -0.1)}, HoldReason.GOAL_INVALID, "x, y"),
+    ({"goal": (-1.2, 0.0, 0.0)}, HoldReason.GOAL_INVALID, "placement region"),
+    ({"target": TARGET}, HoldReason.TARGET_INVALID, "yaw"),
+], ids=["no-shape", "bad-shape", "no-goal", "goal-tf", "goal-nan", "goal-short", "goal-outside", "no-yaw"])
+def test_a_place_policy_holds_without_a_usable_shape_goal_or_yaw(change, reason, words):
+    step = place_step()
+    result = step(place_inputs(**change))
+    assert isinstance(result, Hold) and result.reason is reason and words in result.detail, result
+    assert step.policy.seen == []  # the policy never ran on a partial observation
+    assert isinstance(step(place_inputs()), Command)  # and runs once all is there
+
+
+def test_the_goal_and_yaw_reach_the_policy_by_the_objects_symmetry():
+    """A box turned by half a turn, and its goal with it, is the same observation (symmetry 2);
+    a quarter turn is not."""
+    seen = []
+    for turn in (0.0, math.pi, math.pi / 2):
+        step = place_step()
+        step(place_inputs(target=(*TARGET, 0.3 + turn), goal=(-0.6, -0.1, 1.0 + turn)))
+        seen += step.policy.seen
+    first, half, quarter = seen
+    np.testing.assert_allclose(first, half, atol=1e-9)
+    assert not np.allclose(first, quarter, atol=1e-3)

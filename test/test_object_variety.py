@@ -84,9 +84,8 @@ def test_a_box_turned_by_its_symmetry_reads_the_same():
     square = ObjectShape("box", (0.05, 0.05, 0.04))
     from fr5_rl.observation import object_features
 
-    tcp = (1.0, 0.0, 0.0, 0.0)  # pointing down
-    turned = [(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)) for yaw in (0.3, 0.3 + math.pi / 2)]
-    first, second = (object_features(square, q, tcp) for q in turned)
+    tcp_yaw = 0.0
+    first, second = (object_features(square, yaw, tcp_yaw) for yaw in (0.3, 0.3 + math.pi / 2))
     assert first == pytest.approx(second, abs=1e-12)
 
 
@@ -110,13 +109,24 @@ def test_objects_wider_than_the_stroke_or_unknown_kinds_are_refused():
         load_env_config({"object": {"variety": {"cylinder_radius": [0.03, 0.02]}}})
 
 
-def test_the_policy_node_refuses_a_model_that_needs_the_objects_shape():
-    from fr5_rl.config import package_root
-    from fr5_rl.deploy.bundle import ModelFilesError
-    from fr5_rl.deploy.deployment import DeploymentStep
-    from fr5_rl.deploy.policy import load_policy
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_the_deployed_step_sees_the_object_and_goal_as_the_place_environment_does(seed):
+    """Shape, size, yaw (relative to the gripper, by symmetry) and the goal, period by period, as
+    the environment builds them: one code path for both."""
+    from test_deployment import run_beside_the_environment
 
-    policy = load_policy(package_root() / "models" / "grasp", "onnx")
-    cfg = load_env_config({**policy.meta["env_overrides"], "observation": {"object_features": True}})
-    with pytest.raises(ModelFilesError, match="object_features"):
-        DeploymentStep(policy, load_robot_spec(), cfg, 0.1, 0.5)
+    overrides = {"object": {"variety": {"enabled": True}}, "observation": {"object_features": True}}
+    actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (6, 7))
+    size = observation_size("place", load_env_config(overrides).observation)
+    observations = run_beside_the_environment("place", overrides, actions, size, seed=seed)
+    assert any(abs(value) > 0.05 for value in observations[0][-9:-7]) or observations[0][-9:-7].tolist() == [0, 0]
+
+
+def test_a_box_published_with_its_longer_side_along_y_is_the_same_box_turned():
+    from fr5_rl.objects import shape_from_extents
+
+    shape, turn = shape_from_extents("box", (0.03, 0.06, 0.05))
+    assert shape.size == (0.06, 0.03, 0.05) and turn == pytest.approx(math.pi / 2)
+    assert shape_from_extents("box", (0.06, 0.03, 0.05)) == (shape, 0.0)
+    with pytest.raises(ValueError):
+        shape_from_extents("box", (0.06, -0.03, 0.05))

@@ -31,6 +31,7 @@ debian_ros_packages=(
   python3-rosservice rosbash ros-robot-state-publisher joint-state-publisher rviz
   python3-tf2-ros python3-tf2-geometry-msgs python3-sensor-msgs python3-geometry-msgs
   python3-std-msgs python3-std-srvs python3-visualization-msgs ros-diagnostic-msgs python3-diagnostic-msgs
+  python3-shape-msgs
   catkin librostest-dev liburdfdom-tools catkin-lint python3-venv python3-pip
   xvfb x11-apps imagemagick python3-message-filters libegl1 libegl-mesa0 python3-rosbag
 )
@@ -40,6 +41,7 @@ noetic_packages=(
   ros-noetic-robot-state-publisher ros-noetic-joint-state-publisher ros-noetic-rviz
   ros-noetic-tf2-ros ros-noetic-tf2-geometry-msgs ros-noetic-sensor-msgs ros-noetic-geometry-msgs
   ros-noetic-std-msgs ros-noetic-std-srvs ros-noetic-visualization-msgs ros-noetic-diagnostic-msgs
+  ros-noetic-shape-msgs
   liburdfdom-tools python3-catkin-lint python3-venv python3-pip xvfb x11-apps imagemagick
   ros-noetic-message-filters ros-noetic-rosbag libegl1 libegl-mesa0
 )

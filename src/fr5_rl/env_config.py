@@ -29,6 +29,8 @@ class SimulationConfig:
     :param physics_dt: s per physics step; divides ``control_dt``.
     :param gravity: m/s^2 along base z.
     :param gripper_force: N the fingers squeeze with.
+    :param object_spinning_friction: m, the object's torsional friction (PyBullet's
+        ``spinningFriction``): what resists the object turning about the pads' axis in the grasp.
     """
 
     control_dt: float
@@ -39,6 +41,7 @@ class SimulationConfig:
     arm_velocity_gain: float
     finger_position_gain: float
     gripper_force: float
+    object_spinning_friction: float
 
 
 @dataclass(frozen=True)

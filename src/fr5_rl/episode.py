@@ -8,6 +8,7 @@ physics step) and let it judge. Only :mod:`fr5_rl.sim` talks to PyBullet.
 from __future__ import annotations
 
 import copy
+import dataclasses
 from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
@@ -18,6 +19,7 @@ from .control_chain import ControlChain
 from .draws import EpisodeDraws, draw_episode, draw_place
 from .env_config import EnvConfig, load_env_config
 from .kinematics import ForwardKinematics
+from .objects import yaw_of
 from .observation import ActionHistory, ObservationBuilder, goal_features, object_features
 from .sim.plant import JointStates, Measurement, Plant, Pose, SceneDescription
 from .tasks import TASKS, EpisodeVerdict, Task, TaskState, held_as_the_camera_sees, task_state_from
@@ -145,10 +147,11 @@ class Episode:
         sensed = chain.sense(reading, tcp_axis, state.object_position, state.tcp_to_object_distance, held,
                              now - age, now, rng)
         builder = self.observation_builder
-        shape = (object_features(self.plant.object_shape, state.object_quaternion, reading.tcp_quaternion)
+        object_yaw = yaw_of(state.object_quaternion) if builder.object_features or builder.include_goal else 0.0
+        shape = (object_features(self.plant.object_shape, object_yaw, yaw_of(reading.tcp_quaternion))
                  if builder.object_features else ())
-        goal = (goal_features(self.plant.object_shape, sensed.object_position, state.object_quaternion,
-                              self.draws.goal) if builder.include_goal else ())
+        goal = (goal_features(self.plant.object_shape, sensed.object_position, object_yaw, self.draws.goal)
+                if builder.include_goal else ())
         observation = builder.build_from(
             sensed.joint_positions, sensed.joint_velocities, sensed.gripper_width, self.chain.sent_gripper_width,
             sensed.tcp_position, sensed.tcp_approach_axis, sensed.object_position,
@@ -235,8 +238,10 @@ class Episode:
         return self.plant.object_pose()
 
     def scene(self) -> SceneDescription:
-        """The table and this episode's object (no simulator query)."""
-        return self.plant.scene()
+        """The table, this episode's object and its goal (no simulator query)."""
+        scene = self.plant.scene()
+        goal = self.draws.goal if self.draws is not None else None
+        return scene if goal is None else dataclasses.replace(scene, goal=tuple(goal))
 
     # ------------------------------------------------------------------ saved states
     def save_state(self) -> Dict[str, Any]:

@@ -134,9 +134,12 @@ class ScriptedExpert:
                 if tcp_z < carry_z - 0.02:
                     return "carry", (tcp_x, tcp_y, carry_z)
                 return "carry", (*hand_over_goal, carry_z)
-            if object_z - start_z > 0.003 or to_goal > self.place_tolerance:
-                # Down onto the goal, still closing the last millimetres over it.
-                return "lower", (*hand_over_goal, resting_grasp_z - 0.002)
+            above_rest = object_z - start_z
+            if above_rest > 0.003 or to_goal > self.place_tolerance:
+                # Down onto the goal, still closing the last millimetres over it. The hand aims
+                # by where the object hangs now (it may have slipped in the grasp), and only 1 mm
+                # below its rest: pressing further slides the object up into the palm.
+                return "lower", (*hand_over_goal, tcp_z - above_rest - 0.001)
             return "release", (tcp_x, tcp_y, tcp_z)
         if to_goal <= task.settings.position_tolerance and abs(object_z - start_z) < 0.005:
             if state.gripper_width < 0.9 * self.env.robot_spec.max_opening_width:

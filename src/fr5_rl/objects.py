@@ -85,6 +85,18 @@ class ObjectShape:
         return min(error, period - error)
 
 
+def shape_from_extents(kind: str, extents: Sequence[float]) -> Tuple[ObjectShape, float]:
+    """An object's shape from extents along a frame of its own (m: x, y, z; a cylinder's x and y
+    are its diameter), and the turn (rad) from that frame's x axis to the shape's: for a box whose
+    y side is the longer, the convention's x is that frame's y (``pi / 2``), else 0.
+
+    :raises ValueError: an unknown kind or extents that are not three positive lengths.
+    """
+    if kind == "box" and len(extents) == 3 and extents[1] > extents[0]:
+        return ObjectShape(kind, (float(extents[1]), float(extents[0]), float(extents[2]))), math.pi / 2.0
+    return ObjectShape(kind, tuple(float(e) for e in extents)), 0.0
+
+
 def yaw_of(quaternion: Sequence[float]) -> float:
     """Yaw (rad) of a frame's x axis in the parent's xy plane, from its quaternion (x, y, z, w)."""
     x, y, z, w = quaternion

@@ -80,26 +80,26 @@ def observation_size(task: str, obs_cfg: ObservationConfig) -> int:
     return base + ARM_ACTION_SIZE * obs_cfg.previous_actions + hint + shape + (GOAL_SIZE if include_goal else 0)
 
 
-def goal_features(shape: ObjectShape, object_position: Sequence[float], object_quaternion: Sequence[float],
+def goal_features(shape: ObjectShape, object_position: Sequence[float], object_yaw: float,
                   goal: Sequence[float]) -> List[float]:
     """The raw goal block: goal minus object (x, y, m, base_link), then ``(sin kΔ, cos kΔ)`` of the
     goal's yaw relative to the object's (``(0, 0)`` for a cylinder).
 
+    :param object_yaw: rad, the object's x axis in base_link (:func:`~fr5_rl.objects.yaw_of`).
     :param goal: (x, y, yaw) of where the object is to stand (m, m, rad; base_link).
     """
-    sine, cosine = shape.yaw_features(goal[2], yaw_of(object_quaternion))
+    sine, cosine = shape.yaw_features(goal[2], object_yaw)
     return [goal[0] - object_position[0], goal[1] - object_position[1], sine, cosine]
 
 
-def object_features(shape: ObjectShape, object_quaternion: Sequence[float],
-                    tcp_quaternion: Sequence[float]) -> List[float]:
+def object_features(shape: ObjectShape, object_yaw: float, gripper_yaw: float) -> List[float]:
     """The raw object block of the observation: ``(sin kΔ, cos kΔ)`` of the object's yaw relative
     to the gripper's (:meth:`ObjectShape.yaw_features`), then its extent along its own x, y, z (m).
 
-    :param object_quaternion: the object's orientation (x, y, z, w) in base_link.
-    :param tcp_quaternion: the tcp frame's orientation (x, y, z, w) in base_link.
+    :param object_yaw: rad, the object's x axis in base_link (:func:`~fr5_rl.objects.yaw_of`).
+    :param gripper_yaw: rad, the tcp frame's x axis in base_link.
     """
-    sine, cosine = shape.yaw_features(yaw_of(object_quaternion), yaw_of(tcp_quaternion))
+    sine, cosine = shape.yaw_features(object_yaw, gripper_yaw)
     return [sine, cosine, *shape.size]
 
 

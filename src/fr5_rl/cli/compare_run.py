@@ -21,6 +21,7 @@ import math
 from pathlib import Path
 from typing import List, Optional
 
+from ..env_config import TASK_NAMES
 from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec, robot_names
 from ..deploy.bundle import write_json_atomic
 from ..sim.driver_profile import load_driver_profile, profile_summary
@@ -44,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--joint-states-topic", default=None, help="default: /frrobot/joint_states, else /joint_states")
     parser.add_argument("--command-topic", default=None,
                         help="default: /frrobot/joints_position_controller/command, else /fr5/arm_controller/command")
-    parser.add_argument("--task", choices=["reach", "grasp"], default=None, help="the replay's scene (config's)")
+    parser.add_argument("--task", choices=TASK_NAMES, default=None, help="the replay's scene (config's)")
     parser.add_argument("--robot", choices=robot_names(), default=DEFAULT_ROBOT, help="the arm that made the run (fr5)")
     parser.add_argument("--force", action="store_true", help="replace an existing report in --out")
     return parser

@@ -20,6 +20,7 @@ import math
 from pathlib import Path
 from typing import List, Optional
 
+from ..env_config import TASK_NAMES
 from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec, robot_names
 from ..deploy.bundle import write_json_atomic
 from ..sim.driver_profile import load_driver_profile, profile_summary, write_driver_profile
@@ -36,7 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="the profile whose other keys the fitted one keeps (default: config/sim_to_real.yaml's)")
     parser.add_argument("--joint-states-topic", default=None)
     parser.add_argument("--command-topic", default=None)
-    parser.add_argument("--task", choices=["reach", "grasp"], default=None, help="the replay's scene (config's)")
+    parser.add_argument("--task", choices=TASK_NAMES, default=None, help="the replay's scene (config's)")
     parser.add_argument("--robot", choices=robot_names(), default=DEFAULT_ROBOT, help="the arm that made the run (fr5)")
     parser.add_argument("--servo-rates", type=float, nargs="+", default=None, metavar="HZ",
                         help="also try these servo rates (default: config/sim_to_real.yaml's; the base profile's "

@@ -11,6 +11,7 @@ from typing import List, Optional
 
 from ..config import ConfigError, robot_names
 from ..deploy.bundle import ModelFilesError
+from ..env_config import TASK_NAMES
 from ..training.run_settings import DaggerRun
 from ..help_text import HelpFormatter, plain
 from . import fail, script_args
@@ -19,7 +20,7 @@ from . import fail, script_args
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="imitate.py", description=plain(__doc__.split("\n\n")[0]),
                                      epilog=plain(__doc__.split("\n\n", 1)[1]), formatter_class=HelpFormatter)
-    parser.add_argument("--task", choices=["reach", "grasp"], default="grasp")
+    parser.add_argument("--task", choices=TASK_NAMES, default="grasp")
     parser.add_argument("--hyperparams", default=None,
                         help="DAgger YAML (default: config/dagger_<task>.yaml)")
     parser.add_argument("--run-dir", type=Path, default=None, help="default: runs/<task>_dagger_<time>")

@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 from typing import List, Optional
 
+from ..env_config import TASK_NAMES
 from ..config import ConfigError, robot_names
 from ..deploy.bundle import ModelFilesError
 from ..help_text import HelpFormatter, plain
@@ -31,7 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tune.py", description=plain(__doc__.split("\n\n")[0]),
                                      epilog=plain(__doc__.split("\n\n", 1)[1]),
                                      formatter_class=HelpFormatter)
-    parser.add_argument("--task", choices=["reach", "grasp"], default="reach")
+    parser.add_argument("--task", choices=TASK_NAMES, default="reach")
     parser.add_argument("--algo", choices=["ppo", "sac", "td3", "tqc"], default="ppo")
     parser.add_argument("--robot", choices=robot_names(), default=None,
                         help="the arm every trial trains for (default: the hyperparameter file's env.robot, else fr5)")

@@ -252,6 +252,29 @@ def resolve_model_dir(path: str | Path, caller_dir: Optional[str | Path] = None)
     raise ModelFilesError(f"no such model directory: {path} (looked in {' and '.join(str(c) for c in candidates)})")
 
 
+# The settings of a model's training (meta.json env_overrides) that stay wherever it runs: its
+# observation and action, and the objects it was trained to handle (object.variety).
+DEPLOYMENT_SETTINGS = (("robot",), ("simulation", "control_dt"), ("action",), ("observation",), ("object", "variety"))
+
+
+def deployment_overrides(meta: Mapping[str, Any]) -> Dict[str, Any]:
+    """The part of a model's training overrides (``meta.json`` ``env_overrides``) that its
+    observation, action and objects depend on (:data:`DEPLOYMENT_SETTINGS`), without its
+    randomisation or reward: what an evaluation or a simulator of the registered task keeps."""
+    overrides = meta.get("env_overrides") or {}
+    kept: Dict[str, Any] = {}
+    for path in DEPLOYMENT_SETTINGS:
+        value: Any = overrides
+        for key in path:
+            value = value.get(key) if isinstance(value, dict) else None
+        if value is not None:
+            node = kept
+            for key in path[:-1]:
+                node = node.setdefault(key, {})
+            node[path[-1]] = value
+    return kept
+
+
 def task_and_arm(model_dir: Optional[str | Path], task: Optional[str] = None,
                  robot: Optional[str] = None, caller_dir: Optional[str | Path] = None) -> Tuple[str, str]:
     """The task and the arm a launch or a tool runs: the model's (its ``meta.json``), which

@@ -23,7 +23,8 @@ from ..env_config import EnvConfig
 from ..motion_guard import MotionGuard, MotionGuardSettings, StartPhase
 from ..control import JointCommandShaper
 from ..kinematics import ForwardKinematics
-from ..observation import TASK_BLOCKS, ActionHistory, ObservationBuilder, ObservationInputs
+from ..objects import ObjectShape
+from ..observation import TASK_BLOCKS, ActionHistory, ObservationBuilder, ObservationInputs, goal_features, object_features
 from .bundle import ModelFilesError
 from .joint_state import ArmJointState, Reading
 from .policy import Policy
@@ -46,6 +47,10 @@ class HoldReason(enum.Enum):
     UNSAFE_COMMAND = "command failed the safety gate"
     FAR_FROM_START = "far from the training start"
     GRIPPER_FAULT = "the gripper reports a fault"
+    NO_OBJECT_SHAPE = "no object shape received yet"
+    OBJECT_SHAPE_INVALID = "object shape invalid"
+    NO_GOAL = "no place goal received yet"
+    GOAL_INVALID = "place goal unusable"
 
 
 @dataclass(frozen=True)
@@ -86,10 +91,16 @@ class StepInputs:
 
     :param now: current time (s) on the same monotonic clock as the readings' ``received``.
     :param joint_state: newest joint-state reading, None if none arrived yet.
-    :param target: newest target reading (position in ``base_link``, m), None if none yet.
+    :param target: newest target reading, None if none yet: the object's position (m) and, for a
+        policy that observes its yaw, its yaw (rad: the x axis of the object's own frame,
+        :mod:`fr5_rl.objects`), in ``base_link``.
     :param stamp_now: current time (s) on the clock the messages are stamped with (ROS time),
         to judge the target's stamp; 0 to judge by arrival only.
     :param gripper_fault: what the gripper (its bridge) reports wrong, None when nothing.
+    :param object_shape: the object's shape and size, for a policy that observes them (None: none
+        received yet); a reading whose problem is set holds.
+    :param goal: where to set the object down, for a task with a goal: (x, y, yaw) in ``base_link``
+        (m, m, rad; the yaw of the object's own x axis there), None if none received yet.
     """
 
     now: float
@@ -97,6 +108,8 @@ class StepInputs:
     target: Optional[Reading[Sequence[float]]]
     stamp_now: float = 0.0
     gripper_fault: Optional[str] = None
+    object_shape: Optional[Reading[ObjectShape]] = None
+    goal: Optional[Reading[Sequence[float]]] = None
 
 
 def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> float:
@@ -241,16 +254,12 @@ class DeploymentStep:
         self.policy = policy
         self.control_dt = env_cfg.simulation.control_dt
         self.kinematics = ForwardKinematics(robot)
-        if env_cfg.observation.object_features:
-            # The node has the object's position from tf, not yet its shape and size (issue #53):
-            # running the model without them would feed it an object it was not trained on.
-            raise ModelFilesError("the policy observes the object's shape and size (observation.object_features), "
-                                  "which the policy node does not take yet: deploy a model trained without them")
         include_lift, include_goal = TASK_BLOCKS[policy.task]
-        if include_goal:
-            raise ModelFilesError(f"a {policy.task} policy needs its goal, which the policy node does not take yet: "
-                                  "deploy a reach or grasp model")
-        self.builder = ObservationBuilder(robot, env_cfg.observation, include_lift)
+        # What the policy observes of the object besides its position: its shape, size and yaw
+        # (observation.object_features), and where to set it down (a task with a goal).
+        self.needs_shape = bool(env_cfg.observation.object_features)
+        self.needs_goal = include_goal
+        self.builder = ObservationBuilder(robot, env_cfg.observation, include_lift, include_goal)
         if self.builder.size != policy.observation_size:
             raise ModelFilesError(f"the policy takes {policy.observation_size} observation values; this fr5_rl "
                                   f"builds {self.builder.size} for {policy.task}: retrain it")
@@ -259,12 +268,16 @@ class DeploymentStep:
         self.action_history = ActionHistory(self.builder.previous_actions)
         self.gate = SafetyGate(robot, self.control_dt, SafetyZone(robot, env_cfg))
         self.object_rest_z = env_cfg.object_rest_z()
+        self.table_top = env_cfg.table.top_height
         self.joint_state_timeout = float(joint_state_timeout)
         self.target_timeout = float(target_timeout)
         self.new_target_jump = float(new_target_jump)
         margin = float(target_workspace_margin)
         self.target_low = np.asarray(env_cfg.workspace.low, dtype=np.float64) - margin
         self.target_high = np.asarray(env_cfg.workspace.high, dtype=np.float64) + margin
+        # Goals are drawn in the placement region in training: one further out than the margin holds.
+        self.goal_low = np.asarray(env_cfg.object.region_low, dtype=np.float64) - margin
+        self.goal_high = np.asarray(env_cfg.object.region_high, dtype=np.float64) + margin
         self.future_stamp_tolerance = float(future_stamp_tolerance)
         self.guard = (MotionGuard(robot, guard, robot.home_joint_positions,
                                   env_cfg.task(policy.task).start_joint_noise, self.control_dt)
@@ -336,15 +349,24 @@ class DeploymentStep:
             age = max(age, -ahead)  # judged by capture time: a pipeline may deliver old detections
         if age > self.target_timeout:
             return Hold(HoldReason.TARGET_STALE, f"{age:.2f} s old > {self.target_timeout:g} s")
-        target_in_base = np.asarray(target.value, dtype=np.float64).reshape(-1)
-        if target_in_base.shape != (3,):
-            return Hold(HoldReason.TARGET_INVALID, f"target position needs 3 values, got {target.value}")
-        if not np.isfinite(target_in_base).all():
-            return Hold(HoldReason.TARGET_INVALID, f"target position contains NaN or inf: {target.value}")
+        target_pose = np.asarray(target.value, dtype=np.float64).reshape(-1)
+        if target_pose.shape not in ((3,), (4,)):
+            return Hold(HoldReason.TARGET_INVALID, f"target needs a position (3 values) and maybe a yaw, got {target.value}")
+        if not np.isfinite(target_pose).all():
+            return Hold(HoldReason.TARGET_INVALID, f"target contains NaN or inf: {target.value}")
+        if self.needs_shape and target_pose.shape != (4,):
+            return Hold(HoldReason.TARGET_INVALID, "the policy observes the object's yaw; the target carries none")
+        target_in_base = target_pose[:3]
         if np.any(target_in_base < self.target_low) or np.any(target_in_base > self.target_high):
             return Hold(HoldReason.TARGET_OUT_OF_WORKSPACE,
                         f"target at {np.round(target_in_base, 3).tolist()} m (base) lies outside "
                         f"{np.round(self.target_low, 3).tolist()}..{np.round(self.target_high, 3).tolist()} m")
+
+        state = joints.value
+        tcp_position, tcp_rotation = self.kinematics.tcp_pose(state.positions)
+        object_block, goal_block, object_rest_z = self._object_and_goal(inputs, target_pose, tcp_rotation)
+        if isinstance(object_block, Hold):
+            return object_block
 
         # Resuming after a hold, or a new object: start like an episode starts, without the
         # action filter's old momentum and with no previous actions in the observation (the arm
@@ -355,16 +377,14 @@ class DeploymentStep:
             self.shaper.reset()
             self.action_history.reset()
 
-        state = joints.value
-        tcp_position, tcp_rotation = self.kinematics.tcp_pose(state.positions)
         width = state.gripper_width if state.gripper_width is not None else self.gripper_command_width
         try:
             observation = self.builder.build(ObservationInputs(
                 joint_positions=state.positions, joint_velocities=state.velocities, gripper_width=width,
                 gripper_command_width=self.gripper_command_width, tcp_position=tcp_position,
                 tcp_approach_axis=tcp_rotation[:, 2], object_position=target_in_base,
-                object_lift=float(target_in_base[2] - self.object_rest_z),
-                previous_actions=self.action_history.values()))
+                object_lift=float(target_in_base[2] - object_rest_z),
+                previous_actions=self.action_history.values(), object_features=object_block, goal=goal_block))
         except ValueError as error:
             return Hold(HoldReason.OBSERVATION_INVALID, str(error))
         self._last_target = target_in_base
@@ -381,6 +401,41 @@ class DeploymentStep:
         self.action_history.push(action)
         return Command(tuple(targets.tolist()), self.gripper_command_width,
                        tuple(target_in_base.tolist()), inference)
+
+    def _object_and_goal(self, inputs: StepInputs, target_pose: np.ndarray, tcp_rotation: np.ndarray):
+        """The observation's object block (shape, size, yaw), its goal block, each empty where the
+        policy observes none, and the height (m, base_link) of the object's centre at rest on the
+        table (what its lift is measured from: the configured object's, else the shape's); or the
+        :class:`Hold` for a missing or unusable input first."""
+        if not (self.needs_shape or self.needs_goal):
+            return (), (), self.object_rest_z
+        reading = inputs.object_shape
+        if reading is None:
+            return Hold(HoldReason.NO_OBJECT_SHAPE, "waiting for the object's shape and size"), (), 0.0
+        if reading.problem is not None or reading.value is None:
+            return Hold(HoldReason.OBJECT_SHAPE_INVALID, reading.problem or "no value"), (), 0.0
+        shape = reading.value
+        rest_z = self.table_top + shape.size[2] / 2.0
+        object_yaw = float(target_pose[3]) if target_pose.shape == (4,) else 0.0
+        object_block: Sequence[float] = ()
+        if self.needs_shape:
+            gripper_yaw = math.atan2(tcp_rotation[1, 0], tcp_rotation[0, 0])  # the tcp's x axis, as yaw_of
+            object_block = object_features(shape, object_yaw, gripper_yaw)
+        if not self.needs_goal:
+            return object_block, (), rest_z
+        goal = inputs.goal
+        if goal is None:
+            return Hold(HoldReason.NO_GOAL, "waiting for a place goal"), (), 0.0
+        if goal.problem is not None:
+            return Hold(HoldReason.GOAL_INVALID, goal.problem), (), 0.0
+        values = np.asarray(goal.value, dtype=np.float64).reshape(-1)
+        if values.shape != (3,) or not np.isfinite(values).all():
+            return Hold(HoldReason.GOAL_INVALID, f"a goal is x, y (m) and yaw (rad), finite; got {goal.value}"), (), 0.0
+        if np.any(values[:2] < self.goal_low) or np.any(values[:2] > self.goal_high):
+            return Hold(HoldReason.GOAL_INVALID,
+                        f"goal at {np.round(values[:2], 3).tolist()} m (base) lies outside the placement region "
+                        f"{np.round(self.goal_low, 3).tolist()}..{np.round(self.goal_high, 3).tolist()} m"), (), 0.0
+        return object_block, goal_features(shape, target_pose[:3], object_yaw, values), rest_z
 
     def _start_move(self, measured: np.ndarray, velocities: Optional[np.ndarray]) -> Optional[Union[Command, Hold]]:
         """One period of the slow move into the training start distribution, a refusal, or

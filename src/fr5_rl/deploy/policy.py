@@ -25,13 +25,10 @@ from ..config import robot_config, robot_names
 from ..env_config import TASK_NAMES, EnvConfig, load_env_config
 from ..control import ACTION_SIZE
 from ..observation import observation_size
-from .bundle import (META_FILE, MODEL_FILE, ONNX_FILE, STATS_FILE, ModelFilesError, algorithm_class,
-                     check_files_present, check_sb3_zip, damaged, read_meta, resolve_model_dir)
+from .bundle import (DEPLOYMENT_SETTINGS, META_FILE, MODEL_FILE, ONNX_FILE, STATS_FILE, ModelFilesError,
+                     algorithm_class, deployment_overrides, check_files_present, check_sb3_zip, damaged, read_meta, resolve_model_dir)
 
 TASKS = TASK_NAMES  # a model of any task loads (the policy node then says what it can run)
-# Settings a trained policy depends on: change one and the observation or the action means
-# something else than during training.
-DEPLOYMENT_SETTINGS = (("robot",), ("simulation", "control_dt"), ("action",), ("observation",))
 
 
 class Policy:
@@ -46,23 +43,9 @@ class Policy:
         self.task = str(meta["task"])
 
     def deployment_overrides(self) -> Dict[str, Any]:
-        """The part of the model's training overrides (``meta.json`` ``env_overrides``) that its
-        observation and action depend on (:data:`DEPLOYMENT_SETTINGS`, e.g.
-        ``observation.previous_actions``), without its randomisation or reward: what an
-        evaluation of the registered task keeps, so that the environment builds what the policy
-        takes."""
-        overrides = self.meta.get("env_overrides") or {}
-        kept: Dict[str, Any] = {}
-        for path in DEPLOYMENT_SETTINGS:
-            value: Any = overrides
-            for key in path:
-                value = value.get(key) if isinstance(value, dict) else None
-            if value is not None:
-                node = kept
-                for key in path[:-1]:
-                    node = node.setdefault(key, {})
-                node[path[-1]] = value
-        return kept
+        """:func:`~fr5_rl.deploy.bundle.deployment_overrides` of this model: what an evaluation of
+        the registered task keeps, so that the environment builds what the policy takes."""
+        return deployment_overrides(self.meta)
 
     def act(self, observation: np.ndarray) -> np.ndarray:
         """The deterministic action for one raw observation.

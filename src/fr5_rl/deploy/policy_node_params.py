@@ -29,6 +29,8 @@ class PolicyNodeParams:
     joint_velocity_source: str
     gripper_fault_topic: str
     target_topic: str
+    target_shape_topic: str
+    goal_topic: str
     command_topic: str
     gripper_command_topic: str
     command_gripper: bool

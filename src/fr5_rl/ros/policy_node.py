@@ -18,7 +18,13 @@ waits, up to ``~sim_time_input_wait`` wall seconds, for the joint state and targ
 period's start, so the outcome does not depend on which topic arrived first. Per-cycle timing
 goes to ``~timing`` (Float64MultiArray: loop period, inference time, compute latency,
 joint-state age, the wait for a new joint state, all seconds, and 1.0 where the period acted on
-a state an earlier period had used, else 0.0) and a summary to ``/diagnostics`` at 1 Hz. In real
+a state an earlier period had used, else 0.0) and a summary to ``/diagnostics`` at 1 Hz.
+
+A model that observes the object's shape, size and yaw (``observation.object_features``) or sets
+it down at a goal (the place task) also takes ``~target_shape_topic`` (shape_msgs/SolidPrimitive,
+a BOX's dimensions along the target pose's frame), the yaw from the target pose's orientation,
+and ``~goal_topic`` (geometry_msgs/PoseStamped in any frame tf2 can bring into the base frame:
+x, y and the yaw of the object's x axis at the goal); it holds until both have come. In real
 time a period waits, up to ``~fresh_state_wait``, for a joint state no period acted on
 (:class:`~fr5_rl.deploy.joint_state.FreshStateWait`). Parameters: ``config/policy_node.yaml``.
 """
@@ -36,6 +42,7 @@ import tf2_geometry_msgs  # noqa: F401  (registers PoseStamped with tf2)
 import tf2_ros
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
+from shape_msgs.msg import SolidPrimitive
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray, MultiArrayDimension
@@ -48,10 +55,12 @@ from ..deploy.bundle import ModelFilesError, resolve_model_dir
 from ..deploy.deployment import Command, DeploymentStep, Hold, HoldReason, StepInputs
 from ..deploy.joint_state import FreshStateWait, JointStateReader, Reading, velocities_from_positions
 from ..motion_guard import StartPhase
+from ..objects import yaw_of
 from ..deploy.policy import load_policy
 from ..deploy.policy_node_params import PolicyNodeParams
 from .params import exit_if_help_asked, node_parameters
 from .lifetime import init_node
+from .object_messages import shape_from_primitive
 
 TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.ExtrapolationException,
              tf2_ros.InvalidArgumentException)
@@ -122,6 +131,15 @@ class PolicyNode:
         if params.gripper_fault_topic:
             rospy.Subscriber(params.gripper_fault_topic, Bool, self.on_gripper_fault, queue_size=1)
         rospy.Subscriber(params.target_topic, PoseStamped, self.on_target, queue_size=1, tcp_nodelay=True)
+        # The object's shape (and, for a box given with its longer side along y, the quarter turn
+        # that brings its frame to the convention's) and the place goal, where the model takes them.
+        self.object_shape: Optional[Reading] = None
+        self.shape_turn = 0.0
+        self.goal: Optional[PoseStamped] = None
+        if self.step.needs_shape or self.step.needs_goal:
+            rospy.Subscriber(params.target_shape_topic, SolidPrimitive, self.on_target_shape, queue_size=1)
+        if self.step.needs_goal:
+            rospy.Subscriber(params.goal_topic, PoseStamped, self.on_goal, queue_size=1)
         rospy.Service("~enable", SetBool, self.on_enable)
         rospy.Service("~reset", Trigger, self.on_reset)
         rospy.Service("~go_to_start", Trigger, self.on_go_to_start)
@@ -152,6 +170,18 @@ class PolicyNode:
         if self.sim_time:
             with self.inputs_changed:
                 self.inputs_changed.notify_all()
+
+    def on_target_shape(self, message: SolidPrimitive) -> None:
+        try:
+            shape, turn = shape_from_primitive(message)
+            reading = Reading(shape, time.monotonic())
+        except ValueError as error:
+            shape, turn, reading = None, 0.0, Reading(None, time.monotonic(), f"{self.params.target_shape_topic}: {error}")
+        with self.inputs_changed:
+            self.object_shape, self.shape_turn = reading, turn
+
+    def on_goal(self, message: PoseStamped) -> None:
+        self.goal = message
 
     def on_gripper_fault(self, message: Bool) -> None:
         with self.inputs_changed:
@@ -240,17 +270,38 @@ class PolicyNode:
                 self.inputs_changed.wait(left)
         return time.monotonic() - start
 
-    def target_in_base(self) -> Optional[Reading]:
-        """The newest target transformed into the base frame, or the tf problem."""
-        message, received = self.target, self.target_received
-        if message is None:
-            return None
+    def pose_in_base(self, message: PoseStamped):
+        """``message``'s pose in the base frame: position (m) and the yaw (rad) of the object's
+        own x axis (the shape's quarter turn added), or the tf problem as a string."""
         try:
             transform = self.tf_buffer.lookup_transform(self.params.base_frame, message.header.frame_id, rospy.Time(0))
         except TF_ERRORS as error:
-            return Reading(None, received, f"no transform {message.header.frame_id} -> {self.params.base_frame}: {error}")
-        position = tf2_geometry_msgs.do_transform_pose(message, transform).pose.position
-        return Reading((position.x, position.y, position.z), received, stamp=message.header.stamp.to_sec())
+            return f"no transform {message.header.frame_id} -> {self.params.base_frame}: {error}"
+        pose = tf2_geometry_msgs.do_transform_pose(message, transform).pose
+        q = pose.orientation
+        # A pose without an orientation (all zeros: a detector of positions only) has yaw 0.
+        yaw = yaw_of((q.x, q.y, q.z, q.w)) if (q.x or q.y or q.z or q.w) else 0.0
+        return pose.position.x, pose.position.y, pose.position.z, yaw + self.shape_turn
+
+    def target_in_base(self) -> Optional[Reading]:
+        """The newest target transformed into the base frame (position, m, and yaw, rad), or the tf problem."""
+        message, received = self.target, self.target_received
+        if message is None:
+            return None
+        pose = self.pose_in_base(message)
+        if isinstance(pose, str):
+            return Reading(None, received, pose)
+        return Reading(pose, received, stamp=message.header.stamp.to_sec())
+
+    def goal_in_base(self) -> Optional[Reading]:
+        """The place goal in the base frame (x, y, m; yaw, rad), or the tf problem; None before one came."""
+        message = self.goal
+        if message is None or not self.step.needs_goal:
+            return None
+        pose = self.pose_in_base(message)
+        if isinstance(pose, str):
+            return Reading(None, 0.0, f"{self.params.goal_topic}: {pose}")
+        return Reading((pose[0], pose[1], pose[3]), 0.0, stamp=message.header.stamp.to_sec())
 
     # ------------------------------------------------------------------ the 50 Hz loop
     def on_clock(self, message: Clock) -> None:
@@ -281,7 +332,8 @@ class PolicyNode:
             previous_hold = self.step.last_hold
             previous_phase = self.step.guard.phase if self.step.guard is not None else None
             result = self.step(StepInputs(time.monotonic(), joint_state, self.target_in_base(),
-                                            rospy.Time.now().to_sec(), self.gripper_fault))
+                                          rospy.Time.now().to_sec(), self.gripper_fault, self.object_shape,
+                                          self.goal_in_base()))
         if self.step.guard is not None and self.step.guard.phase is not previous_phase:
             self.report_start(self.step.guard.phase, joint_state)
         if isinstance(result, Hold):
@@ -325,7 +377,7 @@ class PolicyNode:
         # nodes start (~startup_grace), which every launch goes through; a gripper still
         # activating, or a camera frame whose static transform has not come yet, is no fault either.
         starting = (hold.reason in (HoldReason.NO_JOINT_STATE, HoldReason.NO_TARGET, HoldReason.GRIPPER_FAULT,
-                                    HoldReason.TARGET_UNAVAILABLE)
+                                    HoldReason.TARGET_UNAVAILABLE, HoldReason.NO_OBJECT_SHAPE, HoldReason.NO_GOAL)
                     and time.monotonic() - self.started < self.params.startup_grace)
         if hold.reason is HoldReason.DISABLED or starting:
             if previous is None or previous.reason != hold.reason:

@@ -1,6 +1,7 @@
 """Messages the simulator node publishes: joint states by name, and rviz markers of the scene."""
 from __future__ import annotations
 
+import math
 from typing import Iterable, Sequence, Tuple
 
 import rospy
@@ -53,4 +54,19 @@ def scene_markers(scene: SceneDescription, object_pose: Pose, tcp_path: Iterable
     path = _marker(Marker.LINE_STRIP, "tcp_path", (0.1, 0.5, 1.0, 0.9), frame, stamp)
     path.scale.x = 0.004
     path.points = [Point(x=x, y=y, z=z) for x, y, z in tcp_path]
-    return MarkerArray(markers=[table, obj, path])
+    markers = [table, obj, path]
+    if scene.goal is not None:
+        markers.append(goal_marker(scene, stamp))
+    return MarkerArray(markers=markers)
+
+
+def goal_marker(scene: SceneDescription, stamp: rospy.Time) -> Marker:
+    """The object's outline where it is to be set down: its footprint at the goal, translucent green."""
+    kind = Marker.CYLINDER if scene.object_shape == "cylinder" else Marker.CUBE
+    goal = _marker(kind, "goal", (0.2, 0.85, 0.3, 0.45), scene.frame_id, stamp)
+    goal.scale.x, goal.scale.y, _ = scene.object_size
+    goal.scale.z = 0.004  # a footprint on the table
+    x, y, yaw = scene.goal
+    goal.pose.position.x, goal.pose.position.y, goal.pose.position.z = x, y, scene.table_top_height + 0.002
+    goal.pose.orientation.z, goal.pose.orientation.w = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+    return goal

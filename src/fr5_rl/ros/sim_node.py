@@ -12,8 +12,11 @@ against it:
   per joint, ``~response_time_constant_s``: a driver profile, docs/sim_to_real.md), and
   ``~gripper_command_topic`` (std_msgs/Float64, opening width in m);
 - acts as the camera: the object's pose on ``~target_topic`` (geometry_msgs/PoseStamped) in
-  ``~camera_frame``, computed with config/static_transforms.yaml and optional noise (unless
-  ``~publish_target`` is false: a detector on a simulated camera publishes it instead);
+  ``~camera_frame``, computed with config/static_transforms.yaml and optional noise, and its
+  shape on ``~target_shape_topic`` (shape_msgs/SolidPrimitive, latched, each episode) (unless
+  ``~publish_target`` is false: a detector on a simulated camera publishes them instead);
+- for a task with a goal (place), publishes the episode's goal on ``~goal_topic``
+  (geometry_msgs/PoseStamped, latched) in ``~goal_frame``, as an operator or a line's PLC would;
 - publishes the object's true pose, size and shape (visualization_msgs/Marker in base_link) on
   ``~object_topic`` with every joint state, stamped alike, for the simulated camera (camera_node);
 - publishes rviz markers (table, object, tcp path) on ``~markers``;
@@ -56,14 +59,16 @@ import rospy
 from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from shape_msgs.msg import SolidPrimitive
 from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..config import ConfigError, whole_multiple
-from ..deploy.bundle import ModelFilesError, task_and_arm
+from ..deploy.bundle import ModelFilesError, deployment_overrides, read_meta, resolve_model_dir, task_and_arm
 from ..episode import Episode
 from ..episode_runner import EpisodeRunner
+from ..observation import TASK_BLOCKS
 from ..sim.plant import JointStates
 from ..tasks import EpisodeVerdict
 from ..sim.controller_emulator import ControllerEmulator
@@ -72,6 +77,7 @@ from ..sim.servo import DriverModel
 from ..transforms import load_static_transforms, matrix_from_quaternion, quaternion_from_matrix, transform_in
 from .params import exit_if_help_asked, node_parameters
 from .sim_loops import LockstepLoop, RealTimeLoop
+from .object_messages import primitive_from_shape
 from .sim_messages import joint_state_message, object_marker
 from .lifetime import init_node
 
@@ -90,15 +96,18 @@ class SimulatorNode:
         # contradicts it refuses.
         task, robot = task_and_arm(params.model or None, params.task or None, params.robot or None,
                                    params.caller_dir or None)
+        # The objects the model was trained to handle (object.variety), as evaluate.py keeps them.
+        model_settings = (deployment_overrides(read_meta(resolve_model_dir(params.model, params.caller_dir or None)))
+                          if params.model else {})
         if params.lockstep:
             if params.servo_rate > 0 or any(params.response_time_constant_s):
                 raise ConfigError("sim_node: lockstep advances whole control periods as gym does; it cannot also "
                                   "model a servo cycle or response: set ~servo_rate 0 and "
                                   "~response_time_constant_s [] (driver:=default) or ~lockstep false")
-            self.sim = Episode.build(task, robot)  # the gym world, as `evaluate.py` builds it
+            self.sim = Episode.build(task, robot, model_settings)  # the gym world, as `evaluate.py` builds it
         else:
             # The stand-in arm runs at its own physics step, finer than reach training uses.
-            self.sim = Episode.build(task, robot, {task: {"simulation": {
+            self.sim = Episode.build(task, robot, {**model_settings, task: {"simulation": {
                 "physics_dt": params.physics_dt, "solver_iterations": params.solver_iterations}}})
         self.spec = self.sim.robot_spec
         self.physics_dt = self.sim.physics_dt
@@ -110,8 +119,9 @@ class SimulatorNode:
         # The driver: its servo cycle and response (a driver profile's; none by default).
         self.driver = DriverModel(params.servo_rate, params.servo_delay_cycles, params.response_time_constant_s,
                                   self.physics_dt, self.spec.home_joint_positions)
-        self.base_in_camera = np.linalg.inv(
-            transform_in(load_static_transforms(), self.spec.base_frame, params.camera_frame))
+        static_transforms = load_static_transforms()
+        self.base_in_camera = np.linalg.inv(transform_in(static_transforms, self.spec.base_frame, params.camera_frame))
+        self.base_in_goal_frame = np.linalg.inv(transform_in(static_transforms, self.spec.base_frame, params.goal_frame))
         self.rng = np.random.default_rng(params.seed)  # camera noise
         self.outcome_log: Optional[Path] = None
         if params.outcome_log:
@@ -150,6 +160,10 @@ class SimulatorNode:
                            if params.publish_target else None)
         self.object_pub = (rospy.Publisher(params.object_topic, Marker, queue_size=10)
                            if params.object_topic else None)
+        self.shape_pub = (rospy.Publisher(params.target_shape_topic, SolidPrimitive, queue_size=1, latch=True)
+                          if params.publish_target else None)
+        self.goal_pub = (rospy.Publisher(params.goal_topic, PoseStamped, queue_size=1, latch=True)
+                         if TASK_BLOCKS[task][1] else None)  # the task has a goal
         self.marker_pub = rospy.Publisher("~markers", MarkerArray, queue_size=2)
         self.outcome_pub = rospy.Publisher("~episode_outcome", String, queue_size=10, latch=True)
         self.clock_pub = rospy.Publisher("/clock", Clock, queue_size=1) if params.lockstep else None
@@ -199,6 +213,7 @@ class SimulatorNode:
         if not runner.next_start_keeps_the_arm and runner.episode > 0 and not self.params.lockstep:
             self._pause_policy_for_teleport()
         runner.place_next(settle)
+        self.publish_object_and_goal()
         self.controller_command = None  # the controller's standing command applies anew
         if settle <= 0.0:
             self.begin_episode()
@@ -396,6 +411,25 @@ class SimulatorNode:
                                                    stamp))
         if self.object_pub is not None:
             self.object_pub.publish(object_marker(self.sim.scene(), self.sim.object_pose(), stamp))
+
+    def publish_object_and_goal(self) -> None:
+        """The new episode's object shape (as the camera stand-in) and goal, latched."""
+        scene = self.sim.scene()
+        if self.shape_pub is not None:
+            self.shape_pub.publish(primitive_from_shape(scene.object_description))
+        if self.goal_pub is None or scene.goal is None:
+            return
+        x, y, yaw = scene.goal
+        goal_in_base = matrix_from_quaternion((x, y, scene.table_top_height),
+                                              (0.0, 0.0, np.sin(yaw / 2.0), np.cos(yaw / 2.0)))
+        goal_in_frame = self.base_in_goal_frame @ goal_in_base
+        message = PoseStamped()
+        message.header.stamp = rospy.Time.now()
+        message.header.frame_id = self.params.goal_frame
+        position, orientation = message.pose.position, message.pose.orientation
+        position.x, position.y, position.z = goal_in_frame[:3, 3]
+        orientation.x, orientation.y, orientation.z, orientation.w = quaternion_from_matrix(goal_in_frame[:3, :3])
+        self.goal_pub.publish(message)
 
     def camera_message(self, stamp: rospy.Time) -> PoseStamped:
         """The object's pose as the camera sees it: in ``~camera_frame``, with optional noise."""

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any, List, Mapping, Optional
 
 from ..config import ConfigError, check_positive, check_time_constants, config_path, deep_update, load_yaml, typed
+from ..env_config import TASK_NAMES
 from .controller_emulator import ControllerEmulatorSettings
 
 
@@ -39,6 +40,9 @@ class SimNodeParams:
     controller_emulator: ControllerEmulatorSettings
     target_topic: str
     publish_target: bool
+    target_shape_topic: str
+    goal_topic: str
+    goal_frame: str
     object_topic: str
     publish_finger_joints: bool
     servo_rate: float
@@ -70,8 +74,9 @@ class SimNodeParams:
         if self.episode_start == "go_to_start" and (self.lockstep or not self.policy_reset_service):
             raise ConfigError(f"{source}: 'episode_start: go_to_start' needs real time and a policy_reset_service "
                               "(the policy node's start move begins each episode)")
-        if self.task not in ("", "reach", "grasp"):
-            raise ConfigError(f"{source}: 'task' must be reach, grasp or \"\" (the model's), got {self.task!r}")
+        if self.task not in ("", *TASK_NAMES):
+            raise ConfigError(f"{source}: 'task' must be one of {', '.join(TASK_NAMES)} or \"\" (the model's), "
+                              f"got {self.task!r}")
         check_positive(source, publish_rate=self.publish_rate, physics_dt=self.physics_dt, camera_rate=self.camera_rate,
                   marker_rate=self.marker_rate, solver_iterations=self.solver_iterations)
         if min(self.episodes, self.camera_noise_std, self.pause_between_episodes, self.reset_settle_time,

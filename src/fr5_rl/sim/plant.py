@@ -75,6 +75,8 @@ class SceneDescription:
     :param object_dims: as placed this episode (after any size randomisation): (radius,
         height) of a cylinder, (half_extent,) of a cube or (half_x, half_y, half_z) of a box, metres.
     :param object_rest_z: z (m) of the object's centre when it stands on the table.
+    :param goal: where the episode's object is to be set down, (x, y, yaw) (m, m, rad), for a task
+        with a goal; else None.
     """
 
     frame_id: str
@@ -84,11 +86,17 @@ class SceneDescription:
     object_shape: str
     object_dims: Tuple[float, ...]
     object_rest_z: float
+    goal: Optional[Tuple[float, float, float]] = None
+
+    @property
+    def object_description(self) -> ObjectShape:
+        """The object's kind and size (m, along its own x, y and z axes: a box's longer top side on x)."""
+        return ObjectShape.from_dims(self.object_shape, self.object_dims)
 
     @property
     def object_size(self) -> Tuple[float, float, float]:
         """Extent (m) of the object along its own x, y and z axes (its bounding box)."""
-        return ObjectShape.from_dims(self.object_shape, self.object_dims).size
+        return self.object_description.size
 
 
 class Plant:

@@ -29,6 +29,7 @@ class PyBulletWorld:
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         if self.client < 0:
             raise RuntimeError("PyBullet could not connect (is another GUI instance open?)")
+        self.object_spinning_friction = sim_cfg.object_spinning_friction
         self.physics_dt = sim_cfg.physics_dt
         self.substeps = int(round(sim_cfg.control_dt / self.physics_dt))
         p.setTimeStep(self.physics_dt, physicsClientId=self.client)
@@ -85,7 +86,7 @@ class PyBulletWorld:
             p.removeBody(self.object_id, physicsClientId=self.client)
         self.object_id = body
         p.changeDynamics(
-            body, -1, mass=mass, lateralFriction=friction, spinningFriction=0.001,
+            body, -1, mass=mass, lateralFriction=friction, spinningFriction=self.object_spinning_friction,
             rollingFriction=0.0001, physicsClientId=self.client,
         )
         return body

@@ -164,7 +164,10 @@ def run_dagger(run: DaggerRun) -> int:
     env = FR5Env(task=run.task, config=env_overrides)
     # Each round is judged on the task as registered and, when training randomises, also on
     # the training variant; the best round is the one with the highest sum of both.
-    eval_envs = {"task": FR5Env(task=run.task)}
+    # "The task" keeps the file's definition of it (objects, observation) but not its randomisation,
+    # so the learner's observation has the same shape in both.
+    plain_overrides = {key: value for key, value in env_overrides.items() if key != "randomisation"}
+    eval_envs = {"task": FR5Env(task=run.task, config=plain_overrides)}
     if env_overrides:
         eval_envs["training_env"] = FR5Env(task=run.task, config=env_overrides)
     expert = ScriptedExpert(env)
