@@ -34,8 +34,12 @@ class ScriptedExpert:
     at_grasp_tolerance = 0.008  # m from the grasp point under which it closes
     # Cartesian speed per phase (m per 20 ms control step): fast in free space, slow near the
     # object so that the arm's few steps of tracking lag do not overshoot into it.
-    place_funnel = 0.02  # m from the goal within which the expert lowers a carried object
-    place_tolerance = 0.008  # m from the goal within which it lets go
+    place_funnel = 0.03  # m from the goal within which the expert moves a carried object at the lowering speed
+    descent_slope = 1.5  # m of height above the table per m from the goal, carrying
+    place_tolerance = 0.012  # m from the goal within which it lets go (success: 0.02)
+    # m: the least step toward a target further away, so that an imitating policy is shown a
+    # clear direction, not a vanishing one, over the last millimetres (it stalled there).
+    min_step = 0.002
     phase_speed = {"hover": 0.015, "descend": 0.006, "close": 0.006, "lift": 0.006,
                    "carry": 0.008, "lower": 0.004, "release": 0.004, "retreat": 0.008}
 
@@ -95,7 +99,7 @@ class ScriptedExpert:
         speed = self.phase_speed[phase]
         if phase == "descend" and tcp_z - grasp_z > 0.06:
             speed = self.phase_speed["hover"]  # slow only for the last centimetres
-        step = min(speed, 0.35 * distance)
+        step = min(speed, max(0.35 * distance, min(distance, self.min_step)))
         if distance > step:
             fraction = step / distance
             target = (tcp_x + offset_x * fraction, tcp_y + offset_y * fraction, tcp_z + offset_z * fraction)
@@ -125,21 +129,20 @@ class ScriptedExpert:
         to_goal = math.hypot(goal_x - object_x, goal_y - object_y)
         tcp_x, tcp_y, tcp_z = state.tcp_position
         offset_x, offset_y = tcp_x - object_x, tcp_y - object_y  # the object's place in the hand
-        resting_grasp_z = start_z + self._grasp_offset()
         if held:
             hand_over_goal = (goal_x + offset_x, goal_y + offset_y)
-            if to_goal > self.place_funnel:
-                # Up to the carry height first, then over the goal.
-                carry_z = resting_grasp_z + self.lift_clearance
-                if tcp_z < carry_z - 0.02:
-                    return "carry", (tcp_x, tcp_y, carry_z)
-                return "carry", (*hand_over_goal, carry_z)
             above_rest = object_z - start_z
+            rest_hand_z = tcp_z - above_rest  # where the hand is when the object stands on the table
+            carry_z = rest_hand_z + self.lift_clearance
+            if to_goal > 2.0 * self.lift_clearance / self.descent_slope and tcp_z < carry_z - 0.02:
+                return "carry", (tcp_x, tcp_y, carry_z)  # far from the goal: up to the carry height first
             if above_rest > 0.003 or to_goal > self.place_tolerance:
-                # Down onto the goal, still closing the last millimetres over it. The hand aims
-                # by where the object hangs now (it may have slipped in the grasp), and only 1 mm
-                # below its rest: pressing further slides the object up into the palm.
-                return "lower", (*hand_over_goal, tcp_z - above_rest - 0.001)
+                # Over the goal along a cone: the nearer, the lower, down to 1 mm below the rest
+                # (pressing further slides the object up into the palm). A cone, not a step from
+                # carrying to lowering: an imitating policy averaged the two at the step and hovered.
+                height = min(self.lift_clearance, self.descent_slope * max(0.0, to_goal - self.place_tolerance / 2.0))
+                phase = "carry" if to_goal > self.place_funnel else "lower"
+                return phase, (*hand_over_goal, rest_hand_z - 0.001 + height)
             return "release", (tcp_x, tcp_y, tcp_z)
         if to_goal <= task.settings.position_tolerance and abs(object_z - start_z) < 0.005:
             if state.gripper_width < 0.9 * self.env.robot_spec.max_opening_width:

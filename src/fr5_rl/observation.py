@@ -58,7 +58,7 @@ import numpy as np
 from .config import RobotSpec
 from .env_config import JointStepHintConfig, ObservationConfig
 from .kinematics import ForwardKinematics, solve_linear as _solve
-from .objects import ObjectShape, yaw_of
+from .objects import ObjectShape
 
 REACH_OBSERVATION_SIZE = 23  # without previous actions
 GRASP_OBSERVATION_SIZE = 24

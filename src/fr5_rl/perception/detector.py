@@ -36,6 +36,7 @@ from typing import Any, List, Optional, Tuple, Type, TypeVar, Union
 import numpy as np
 
 from ..config import ConfigError, load_yaml, typed
+from ..objects import ObjectShape
 from .camera_model import Intrinsics
 from .morphology import dilate, label_components
 
@@ -164,6 +165,15 @@ class Detection:
     kind: str = "cylinder"
     yaw: float = 0.0
     extents: Tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def shape(self) -> Optional[ObjectShape]:
+        """The object's shape if it stands on the table: extents (m) along its own x, y, z, a
+        box's longer and shorter top sides (x along :attr:`yaw`), a cylinder's diameter twice, and
+        its top's height; None where the sides were not measured (zero)."""
+        if min(*self.extents, self.top_height) <= 0.0:
+            return None
+        return ObjectShape(self.kind, (float(self.extents[0]), float(self.extents[1]), float(self.top_height)))
 
 
 @dataclass(frozen=True)

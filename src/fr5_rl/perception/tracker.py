@@ -9,18 +9,26 @@ The tracker's settings are the ``tracker`` section of ``config/detector.yaml``
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from ..config import ConfigError
+from ..objects import ObjectShape
+from ..transforms import quaternion_from_matrix
 from .camera_model import Intrinsics
 from .detector import Detection, DetectorSettings, Refusal, RefusalReason, TableRegion, load_section
 
 # Refusals about what the frame shows (the others are about the frame itself).
 SCENE_REFUSALS = (RefusalReason.NO_OBJECT, RefusalReason.SEVERAL_OBJECTS, RefusalReason.OCCLUDED)
+
+
+def rotation_z(yaw: float) -> np.ndarray:
+    """The 3x3 rotation by ``yaw`` (rad) about z: an upright object's orientation at that yaw."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 class TrackState(enum.Enum):
@@ -35,13 +43,21 @@ class TrackState(enum.Enum):
 
 @dataclass(frozen=True)
 class TrackedObject:
-    """The object position to publish for one frame.
+    """The object pose and shape to publish for one frame.
 
     :param position_table: object centre (m) in the table frame.
     :param state: why this position is believed (:class:`TrackState`).
     :param last_seen: stamp (s) of the frame that last detected it (or in which the hand let it go).
     :param detection: this frame's detection (state SEEN), else None.
     :param position_tcp: in the hand: the centre (m) in the tcp frame (it moves with the tcp).
+    :param yaw: rad, table frame: the object's own x axis (a box's longer top side; any of its
+        symmetric yaws, modulo pi, pi / 2 for a square). SEEN: this frame's; HIDDEN: the last
+        seen one (or the one the hand turned it to before letting go); IN_HAND: turned with the
+        tcp since it was taken. Its orientation in the table frame is Rz(yaw) (upright).
+    :param shape: the object's kind and extents along its own x, y, z (m; the last seen ones
+        unless SEEN); None when never measured.
+    :param orientation_tcp: in the hand: the object's orientation in the tcp frame, quaternion
+        (x, y, z, w), fixed from the moment it was taken (it turns with the tcp).
     """
 
     position_table: Tuple[float, float, float]
@@ -49,6 +65,9 @@ class TrackedObject:
     last_seen: float
     detection: Optional[Detection] = None
     position_tcp: Optional[Tuple[float, float, float]] = None
+    yaw: float = 0.0
+    shape: Optional[ObjectShape] = None
+    orientation_tcp: Optional[Tuple[float, float, float, float]] = None
 
 
 @dataclass(frozen=True)
@@ -123,7 +142,7 @@ class TrackerSettings:
 @dataclass
 class Track:
     """What the tracker believes about the object. ``state`` says which fields mean something:
-    none when LOST; the rest but ``in_tcp`` when SEEN or HIDDEN (it stands on the table at
+    none when LOST; the rest but ``in_tcp`` and ``rotation_tcp`` when SEEN or HIDDEN (it stands on the table at
     ``position``); all of them when IN_HAND.
 
     :param state: see :class:`TrackState`.
@@ -135,6 +154,9 @@ class Track:
     :param rest: its centre's height (m, table frame) and its top height (m) when last seen
         standing on the table: where the hand puts it down, and the table holds it up.
     :param in_tcp: its centre (m) in the tcp frame, while in the hand.
+    :param yaw: rad, table frame: its own x axis (see :attr:`TrackedObject.yaw`).
+    :param shape: its kind and extents when last seen; None: never measured.
+    :param rotation_tcp: its orientation (3x3) in the tcp frame, while in the hand.
     """
 
     state: TrackState
@@ -145,6 +167,9 @@ class Track:
     in_front: float
     rest: Tuple[float, float]
     in_tcp: np.ndarray
+    yaw: float = 0.0
+    shape: Optional[ObjectShape] = None
+    rotation_tcp: np.ndarray = field(default_factory=lambda: np.eye(3))
 
     @classmethod
     def lost(cls) -> "Track":
@@ -241,6 +266,12 @@ class ObjectTracker:
     - otherwise: hold. Several whole candidates, a bare table where it stood, or a timeout drop
       the track (LOST); a frame that holds for another reason leaves the track as it was.
 
+    Each answer carries the object's yaw and shape too (:class:`TrackedObject`): a frame's
+    detection gives them; hidden, the last seen ones stand; in the hand, its orientation in the
+    tcp frame is kept from the moment it was taken, so it turns with the tcp (a policy placing a
+    box at a goal yaw turns it with the wrist), and the yaw it was turned to stays when the hand
+    lets go.
+
     Nothing here knows the object's colour. Pure numpy; the node feeds it each frame's
     result, the tcp pose and the gripper opening.
 
@@ -311,12 +342,14 @@ class ObjectTracker:
             track.position = np.array(result.position_table, dtype=np.float64)
             track.top_height, track.size, track.last_seen = result.top_height, result.size, stamp
             track.rest = (float(track.position[2]), result.top_height)  # seen: standing on the table
+            track.yaw, track.shape = result.yaw, result.shape
             if self._grasp_low is None or stamp >= self._grasp_low_stamp:
                 # Standing, so not (yet) between the fingers; a frame captured before they came
                 # around it (the camera's latency) says nothing about that.
                 self._grasp_tcp = None
                 self._grasp_low = None
-            return TrackedObject(tuple(track.position.tolist()), TrackState.SEEN, stamp, result)
+            return TrackedObject(tuple(track.position.tolist()), TrackState.SEEN, stamp, result, yaw=track.yaw,
+                                 shape=track.shape)
         if not tracking:
             return result
         if result.reason is RefusalReason.SEVERAL_OBJECTS:
@@ -424,12 +457,18 @@ class ObjectTracker:
         axis = np.asarray(self.settings.closing_axis, dtype=np.float64)
         axis /= np.linalg.norm(axis)
         track.in_tcp = in_tcp - float(in_tcp @ axis) * axis  # centred between the fingers
+        # Upright at its yaw then; from now on it turns with the hand.
+        track.rotation_tcp = grasped_from[:3, :3].T @ rotation_z(track.yaw)
         self._place((tcp @ np.append(track.in_tcp, 1.0))[:3], tcp)
 
     def _place(self, position: np.ndarray, tcp: np.ndarray) -> None:
-        """Move the held object to ``position`` (m, table frame), given the tcp pose ``tcp``."""
+        """Move the held object to ``position`` (m, table frame), given the tcp pose ``tcp``
+        (4x4, table frame), and turn it with the tcp."""
         # The table holds it up: a tcp pressing lower slides the fingers along it.
         track = self._track
+        x_axis = tcp[:3, :3] @ track.rotation_tcp[:, 0]
+        if np.hypot(x_axis[0], x_axis[1]) > 1e-6:  # its x straight up or down: no yaw to tell, keep the last
+            track.yaw = float(np.arctan2(x_axis[1], x_axis[0]))
         position = np.array(position, dtype=np.float64)
         if position[2] < track.rest[0]:
             position[2] = track.rest[0]
@@ -509,8 +548,11 @@ class ObjectTracker:
         """The track, now in ``state`` (HIDDEN or IN_HAND), as the position to publish."""
         track = self._track
         track.state = state
-        in_tcp = tuple(track.in_tcp.tolist()) if state is TrackState.IN_HAND else None
-        return TrackedObject(tuple(track.position.tolist()), state, track.last_seen, None, in_tcp)
+        in_hand = state is TrackState.IN_HAND
+        in_tcp = tuple(track.in_tcp.tolist()) if in_hand else None
+        orientation = quaternion_from_matrix(track.rotation_tcp) if in_hand else None
+        return TrackedObject(tuple(track.position.tolist()), state, track.last_seen, None, in_tcp, track.yaw,
+                             track.shape, orientation)
 
     def _closed_on_it(self, tcp: Optional[np.ndarray], width: Optional[float]) -> bool:
         """Whether the fingers, ``width`` (m) open at the tcp pose ``tcp``, hold the tracked object."""

@@ -1,4 +1,5 @@
-"""Detector node: the object's centre from an aligned RGB-D camera, as /target_pose.
+"""Detector node: the object's pose (centre, yaw) and shape from an aligned RGB-D camera, as
+/target_pose (``~target_topic``) and /target_shape (``~target_shape_topic``).
 
 It subscribes to colour, aligned depth and the colour CameraInfo, synchronised with
 message_filters (``~sync_slop``), and hands each frame to
@@ -7,13 +8,21 @@ message_filters (``~sync_slop``), and hands each frame to
 for the one thing standing on the table inside the placement region (config/env.yaml).
 
 - a detection: geometry_msgs/PoseStamped of the object centre on ``~target_topic``, in the
-  image's optical frame, with the image's stamp (orientation: the table's, upright);
+  image's optical frame, with the image's stamp; its orientation is the object's, upright on the
+  table at its yaw (Rz(yaw) in ``~table_frame``: the own x axis along a box's longer top side,
+  any of its symmetric yaws; a cylinder's yaw 0), expressed in the optical frame. Beside it the
+  object's shape on ``~target_shape_topic`` (shape_msgs/SolidPrimitive, latched, published
+  before each target): a BOX's ``[longer, shorter, height]`` along that pose's x, y, z, a
+  CYLINDER's ``[height, radius]`` (m; the height is its top's above the table);
 - the object hidden by the robot while it goes down around it, or held in its fingers: the
   position :class:`fr5_rl.perception.tracker.ObjectTracker` keeps (the last seen one, for
   ``~tracker/hidden_timeout``; the tcp's pose from tf times the grasp offset while the fingers, from
   ``~joint_states_topics`` merged by joint name (e.g. the arm driver's and the gripper bridge's),
   are closed on it), stamped with the new image; ``~track_state``
-  (std_msgs/String) says which: ``seen``, ``hidden``, ``in hand`` or ``holding: <why>``;
+  (std_msgs/String) says which: ``seen``, ``hidden``, ``in hand`` or ``holding: <why>``. Hidden,
+  the pose keeps the last seen yaw and the shape the last seen one; held, the pose is in the tcp
+  frame with the object's orientation in it as it was when the fingers took it (so tf turns it
+  with the tcp), and the shape is the last seen one;
 - no detection (nothing, several candidates, the object hidden too long or gone) or bad input
   (image sizes that differ, an unknown encoding, a missing or zero CameraInfo, depth that is
   all zero or NaN, a frame older than ``~max_image_age``): nothing is published (the policy
@@ -41,6 +50,7 @@ import rospy
 import tf2_ros
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import CameraInfo, Image, JointState
+from shape_msgs.msg import SolidPrimitive
 from std_msgs.msg import Float64MultiArray, String
 
 from ..config import ConfigError, load_robot_spec
@@ -50,11 +60,12 @@ from ..perception.camera_model import Intrinsics
 from ..perception.detector import Detection, DetectorSettings, ObjectDetector, Refusal, RefusalReason, TableRegion
 from ..perception.images import InputError, check_frame, decode_color, decode_depth, intrinsics_from_camera_info
 from ..perception.overlay import draw_detection
-from ..perception.tracker import ObjectTracker, TrackedObject, TrackerSettings, TrackState
+from ..perception.tracker import ObjectTracker, TrackedObject, TrackerSettings, TrackState, rotation_z
 from ..transforms import matrix_from_quaternion, quaternion_from_matrix
 from .images import image_message
 from .params import exit_if_help_asked, node_parameters
 from .lifetime import init_node
+from .object_messages import primitive_from_shape
 
 TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.ExtrapolationException,
              tf2_ros.InvalidArgumentException)
@@ -81,6 +92,7 @@ class DetectorNodeParams:
     depth_topic: str
     camera_info_topic: str
     target_topic: str
+    target_shape_topic: str
     debug_image_topic: str
     table_frame: str
     sync_slop: float
@@ -100,6 +112,26 @@ class DetectorNodeParams:
             raise ConfigError(f"{source}: sync_slop and max_image_age must be > 0")
         if not self.joint_states_topics or len(set(self.joint_states_topics)) != len(self.joint_states_topics):
             raise ConfigError(f"{source}: joint_states_topics must list one or more topics, each once")
+
+
+def target_pose(tracked: TrackedObject, table_from_optical: Optional[np.ndarray]
+                ) -> Tuple[bool, Tuple[float, float, float], Tuple[float, float, float, float]]:
+    """The pose to publish for ``tracked``.
+
+    :param table_from_optical: 4x4 pose (m) of the image's optical frame in the table frame
+        (unused for a held object, which needs none).
+    :return: ``(held, position, quaternion)``: held, both are in the tcp frame (so the user's tf
+        places it at the newest tcp pose rather than the one of an older image, and turns it with
+        the tcp), else in the optical frame; position in m, quaternion (x, y, z, w).
+    """
+    if tracked.position_tcp is not None:
+        return True, tracked.position_tcp, (tracked.orientation_tcp if tracked.orientation_tcp is not None
+                                            else (0.0, 0.0, 0.0, 1.0))
+    optical_from_table = np.linalg.inv(np.asarray(table_from_optical, dtype=np.float64))
+    position = (optical_from_table @ np.append(tracked.position_table, 1.0))[:3]
+    # Upright at its yaw in the table frame, seen from the camera.
+    quaternion = quaternion_from_matrix(optical_from_table[:3, :3] @ rotation_z(tracked.yaw))
+    return False, (float(position[0]), float(position[1]), float(position[2])), quaternion
 
 
 class FingerWidths:
@@ -172,6 +204,8 @@ class DetectorNode:
         self.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
         self.target_pub = rospy.Publisher(params.target_topic, PoseStamped, queue_size=1)
+        # Latched: a node that starts later still learns the shape of the object in view.
+        self.shape_pub = rospy.Publisher(params.target_shape_topic, SolidPrimitive, queue_size=1, latch=True)
         self.debug_pub = rospy.Publisher(params.debug_image_topic, Image, queue_size=1)
         self.state_pub = rospy.Publisher(params.track_state_topic, String, queue_size=1)
         self.timing_pub = rospy.Publisher("~timing", Float64MultiArray, queue_size=10)
@@ -193,7 +227,7 @@ class DetectorNode:
         if params.hand_check_rate > 0:
             self.hand_timer = rospy.Timer(rospy.Duration(1.0 / params.hand_check_rate), self.check_hand)
         rospy.loginfo(f"detector_node: {params.color_topic} + {params.depth_topic} + {params.camera_info_topic} "
-                      f"-> {params.target_topic}")
+                      f"-> {params.target_topic}, {params.target_shape_topic}")
 
     def on_joint_state(self, message: JointState) -> None:
         """Keep the fingers' opening by stamp (any of ``~joint_states_topics``)."""
@@ -327,20 +361,14 @@ class DetectorNode:
         self.state_pub.publish(String(data=tracked.state.value))
         message = PoseStamped()
         message.header.stamp = stamp
+        held, xyz, quaternion = target_pose(tracked, self.table_from_optical)
+        message.header.frame_id = self.params.tcp_frame if held else optical_frame
         position, orientation = message.pose.position, message.pose.orientation
-        if tracked.position_tcp is not None:
-            # Held: in the tcp frame, so the user's tf places it at the newest tcp pose rather
-            # than the one of this (older) image. Orientation: the tcp's (held upright, as grasped).
-            message.header.frame_id = self.params.tcp_frame
-            position.x, position.y, position.z = tracked.position_tcp
-            orientation.w = 1.0
-        else:
-            message.header.frame_id = optical_frame
-            optical_from_table = np.linalg.inv(self.table_from_optical)
-            position.x, position.y, position.z = (optical_from_table @ np.append(tracked.position_table, 1.0))[:3]
-            # An upright object: the table's orientation, seen from the camera.
-            orientation.x, orientation.y, orientation.z, orientation.w = quaternion_from_matrix(
-                optical_from_table[:3, :3])
+        position.x, position.y, position.z = xyz
+        orientation.x, orientation.y, orientation.z, orientation.w = quaternion
+        if tracked.shape is not None:
+            # First: a policy that takes the new target finds the shape its pose's axes refer to.
+            self.shape_pub.publish(primitive_from_shape(tracked.shape))
         self.target_pub.publish(message)
 
     def report(self, refusal: Refusal) -> None:

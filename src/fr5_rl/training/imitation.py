@@ -19,9 +19,9 @@ from typing import Any, Dict, List, Tuple
 
 import numpy as np
 
-from ..config import load_typed
+from ..config import typed
 from ..deploy.bundle import build_meta, machine_description, save_model_dir, write_json_atomic
-from .hyperparameters import DaggerConfig
+from .hyperparameters import DaggerConfig, hyperparameter_path, read_hyperparameter_file
 from .run_settings import DaggerRun
 from .train import EVAL_SEED_OFFSET
 
@@ -151,7 +151,9 @@ def run_dagger(run: DaggerRun) -> int:
 
     t_start = time.time()
     torch.set_num_threads(run.torch_threads)
-    config = load_typed(DaggerConfig, run.hyperparams or f"dagger_{run.task}")
+    name = run.hyperparams or f"dagger_{run.task}"
+    # A file in config/ or config/recipes/, with the ``base`` it builds on.
+    config = typed(DaggerConfig, read_hyperparameter_file(name), str(hyperparameter_path(name).name))
     dagger = config.dagger
     rounds = run.rounds if run.rounds is not None else dagger.rounds
     episodes = run.episodes or dagger.episodes
