@@ -144,3 +144,32 @@ def test_the_expert_grasps_boxes_at_any_yaw_and_places_them_at_the_goals_yaw(tas
         assert sum(bool(info["is_success"]) for info in results) >= at_least, [i.get("failure") for i in results]
     finally:
         env.close()
+
+
+def test_the_scripted_expert_places_the_drawn_boxes_and_cylinders():
+    """Boxes at any yaw and cylinders of every drawn size and mass (object.variety), on seeds the
+    expert was never tuned on: the demonstrations DAgger learns the place model from."""
+    env = FR5Env("place", config={"object": {"variety": {"enabled": True}}, "observation": {"object_features": True}})
+    try:
+        results = [(run_expert(env, 9100 + k), env.episode.plant.object_shape.kind) for k in range(12)]
+    finally:
+        env.close()
+    assert {kind for _, kind in results} == {"box", "cylinder"}
+    successes = sum(bool(info["is_success"]) for info, _ in results)
+    assert successes >= 11, [(kind, info.get("failure")) for info, kind in results]
+
+
+@pytest.mark.parametrize("task, expected", [("place", 0.01), ("grasp", 0.001)])
+def test_the_objects_torsional_friction_is_the_tasks(task, expected):
+    """The place task's carried objects turn in the grasp unless the pads' contact patch resists
+    (env.yaml place.simulation); grasp keeps what its shipped model was trained with."""
+    import pybullet
+
+    env = FR5Env(task)
+    try:
+        env.reset(seed=0)
+        world = env.episode.plant.world
+        spinning = pybullet.getDynamicsInfo(world.object_id, -1, physicsClientId=world.client)[7]
+        assert spinning == pytest.approx(expected)
+    finally:
+        env.close()

@@ -38,8 +38,10 @@ class ScriptedExpert:
     descent_slope = 1.5  # m of height above the table per m from the goal, carrying
     place_tolerance = 0.012  # m from the goal within which it lets go (success: 0.02)
     # m: the least step toward a target further away, so that an imitating policy is shown a
-    # clear direction, not a vanishing one, over the last millimetres (it stalled there).
-    min_step = 0.002
+    # clear direction, not a vanishing one, over the last millimetres: it stalled there at 2 mm
+    # (about 0.1 of an action, what its fit is off by).
+    min_step = 0.005
+    release_height = 0.006  # m above its rest under which a carried object is let go
     phase_speed = {"hover": 0.015, "descend": 0.006, "close": 0.006, "lift": 0.006,
                    "carry": 0.008, "lower": 0.004, "release": 0.004, "retreat": 0.008}
 
@@ -136,7 +138,7 @@ class ScriptedExpert:
             carry_z = rest_hand_z + self.lift_clearance
             if to_goal > 2.0 * self.lift_clearance / self.descent_slope and tcp_z < carry_z - 0.02:
                 return "carry", (tcp_x, tcp_y, carry_z)  # far from the goal: up to the carry height first
-            if above_rest > 0.003 or to_goal > self.place_tolerance:
+            if above_rest > self.release_height or to_goal > self.place_tolerance:
                 # Over the goal along a cone: the nearer, the lower, down to 1 mm below the rest
                 # (pressing further slides the object up into the palm). A cone, not a step from
                 # carrying to lowering: an imitating policy averaged the two at the step and hovered.
