@@ -32,6 +32,7 @@ class ScriptedExpert:
     finger_reach = 0.03
     align_tolerance = 0.01  # m horizontal error under which the expert descends
     at_grasp_tolerance = 0.008  # m from the grasp point under which it closes
+    keep_closing_within = 0.02  # m from the grasp point under which it keeps closing once begun
     # Cartesian speed per phase (m per 20 ms control step): fast in free space, slow near the
     # object so that the arm's few steps of tracking lag do not overshoot into it.
     place_funnel = 0.03  # m from the goal within which the expert moves a carried object at the lowering speed
@@ -85,7 +86,7 @@ class ScriptedExpert:
         elif held:
             phase = "lift"
             target = (object_x, object_y, state.object_start_position[2] + grasp_offset + self.lift_clearance)
-        elif grasp and math.sqrt(dx * dx + dy * dy + dz * dz) < self.at_grasp_tolerance:
+        elif grasp and self._closing(math.sqrt(dx * dx + dy * dy + dz * dz)):
             phase, target = "close", (object_x, object_y, grasp_z)
         elif horizontal_error < self.align_tolerance + 0.5 * max(tcp_z - grasp_z, 0.0):
             # A funnel: the higher above the grasp point, the more lateral error is fine, since
@@ -112,6 +113,16 @@ class ScriptedExpert:
         scale = max(1.0, max(abs(value) for value in delta))
         gripper = -1.0 if phase in ("close", "lift", "carry", "lower") else 1.0
         return np.array([value / scale for value in delta] + [gripper], dtype=np.float32)
+
+    def _closing(self, to_grasp_point: float) -> bool:
+        """Whether to close on the object from ``to_grasp_point`` (m) away: within
+        ``at_grasp_tolerance``, or within ``keep_closing_within`` once the fingers were commanded
+        to close (an observable state): an imitating policy that began to close a few millimetres
+        early was told to open again, and it hovered between the two."""
+        if to_grasp_point < self.at_grasp_tolerance:
+            return True
+        closing = self.env.episode.gripper_command_width < 0.9 * self.env.robot_spec.max_opening_width
+        return closing and to_grasp_point < self.keep_closing_within
 
     def _grasp_offset(self) -> float:
         """m above the object's centre where the fingers close: ``grasp_height_offset``, or

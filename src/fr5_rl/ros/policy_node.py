@@ -109,6 +109,7 @@ class PolicyNode:
         self.inputs_changed = threading.Condition()
         self.sim_time = bool(rospy.get_param("/use_sim_time", False))
         self.last_input_stamp = -1.0  # sim time: stamp of the joint state the last step used
+        self.reset_stamp = -1.0  # sim time: when the last ~reset came (an episode's goal is stamped then)
         # Real time: a period acts on a state no period before acted on (FreshStateWait's why).
         self.fresh_state = FreshStateWait(0.0 if self.sim_time else params.fresh_state_wait)
 
@@ -179,9 +180,12 @@ class PolicyNode:
             shape, turn, reading = None, 0.0, Reading(None, time.monotonic(), f"{self.params.target_shape_topic}: {error}")
         with self.inputs_changed:
             self.object_shape, self.shape_turn = reading, turn
+            self.inputs_changed.notify_all()
 
     def on_goal(self, message: PoseStamped) -> None:
-        self.goal = message
+        with self.inputs_changed:
+            self.goal = message
+            self.inputs_changed.notify_all()
 
     def on_gripper_fault(self, message: Bool) -> None:
         with self.inputs_changed:
@@ -208,6 +212,7 @@ class PolicyNode:
         with self.inputs_changed:
             self.step.start_episode()
             self.reader.restart_estimates()  # as the environment's first observation: velocities 0.0
+            self.reset_stamp = rospy.Time.now().to_sec()
         if self.step.guard is None or not self.step.enabled:
             return TriggerResponse(success=True, message="starting as a new episode")
         return self.wait_for_start("starting as a new episode")
@@ -242,8 +247,13 @@ class PolicyNode:
 
         def arrived() -> bool:
             reading, target = self.reader.reading(), self.target
+            # The episode's shape and goal come latched when it starts, on connections of their
+            # own: a period that began before they arrived would act on none (or the last one).
+            shape_here = not (self.step.needs_shape or self.step.needs_goal) or self.object_shape is not None
+            goal_here = not self.step.needs_goal or (
+                self.goal is not None and self.goal.header.stamp.to_sec() >= self.reset_stamp - 1e-6)
             return (reading is not None and reading.stamp >= wanted
-                    and target is not None and target.header.stamp.to_sec() >= wanted)
+                    and target is not None and target.header.stamp.to_sec() >= wanted and shape_here and goal_here)
 
         with self.inputs_changed:
             while not arrived() and not rospy.is_shutdown():
