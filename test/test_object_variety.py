@@ -118,8 +118,7 @@ def test_the_deployed_step_sees_the_object_and_goal_as_the_place_environment_doe
     overrides = {"object": {"variety": {"enabled": True}}, "observation": {"object_features": True}}
     actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (6, 7))
     size = observation_size("place", load_env_config(overrides).observation)
-    observations = run_beside_the_environment("place", overrides, actions, size, seed=seed)
-    assert any(abs(value) > 0.05 for value in observations[0][-9:-7]) or observations[0][-9:-7].tolist() == [0, 0]
+    run_beside_the_environment("place", overrides, actions, size, seed=seed)  # asserts equality each period
 
 
 def test_a_box_published_with_its_longer_side_along_y_is_the_same_box_turned():
