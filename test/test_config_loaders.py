@@ -84,6 +84,8 @@ def mutated(name: str, change):
     (DaggerConfig, "dagger_grasp", lambda d: d["dagger"].pop("rounds"), "missing key 'dagger.rounds'"),
     (DaggerConfig, "dagger_grasp", lambda d: d["dagger"].update(rounds="many"), "'dagger.rounds' must be an integer"),
     (DaggerConfig, "dagger_grasp", lambda d: d["dagger"].update(expert_share_decay=2.0), "expert_share_decay"),
+    (DaggerConfig, "dagger_grasp", lambda d: d["dagger"].update(learning_rate_schedule="step"), "use one of constant, cosine"),
+    (DaggerConfig, "dagger_grasp", lambda d: d["dagger"].update(gripper_loss_weight=0.0), "'gripper_loss_weight' must be positive"),
 ], ids=lambda v: v if isinstance(v, str) and " " in v else "")
 def test_bad_files_are_refused_with_the_key_path(tmp_path, cls, name, change, words):
     path = write(tmp_path, mutated(name, change))

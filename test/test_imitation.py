@@ -43,3 +43,73 @@ def test_fit_reduces_the_imitation_loss(tmp_path):
     learner = imitation.make_learner(model, normaliser)
     error = np.mean([np.abs(learner(o) - y).mean() for o, y in zip(observations[:100], labels[:100])])
     assert error < 0.2
+
+
+def _toy_fit(schedule: str, gripper_loss_weight: float = 1.0, epochs: int = 8):
+    """A small actor fitted to a map it cannot hold exactly; returns (loss, learner, data)."""
+    rng = np.random.default_rng(1)
+    observations = rng.uniform(-1, 1, (3000, 24)).astype(np.float32)
+    # A learnable map under label noise (as the expert's labels are, seen through a noisy
+    # observation): a constant rate keeps jumping about its best fit.
+    labels = (np.tanh(3.0 * observations[:, :7]) + rng.normal(0.0, 0.3, (3000, 7))).astype(np.float32)
+    normaliser = imitation.Normaliser(observations)
+    algo_kwargs = {"n_steps": 64, "batch_size": 64, "policy_kwargs": {"net_arch": {"pi": [64, 64], "vf": [16]}}}
+    model, _ = imitation.build_model_and_stats("grasp", {}, algo_kwargs, normaliser, seed=0)
+    loss = imitation.fit(model, normaliser, observations, labels, epochs=epochs, learning_rate=3e-3,
+                         schedule=schedule, gripper_loss_weight=gripper_loss_weight, seed=3)
+    return loss, imitation.make_learner(model, normaliser), observations, labels
+
+
+def test_cosine_schedule_anneals_the_rate_to_zero():
+    assert imitation.learning_rate_at("cosine", 1e-3, 0.0) == pytest.approx(1e-3)
+    assert imitation.learning_rate_at("cosine", 1e-3, 0.5) == pytest.approx(5e-4)
+    assert imitation.learning_rate_at("cosine", 1e-3, 1.0) == pytest.approx(0.0, abs=1e-12)
+    assert imitation.learning_rate_at("constant", 1e-3, 0.9) == 1e-3
+
+
+def test_gripper_weight_buys_the_gripper_component_accuracy():
+    def gripper_error(weight):
+        _, learner, observations, labels = _toy_fit("cosine", weight)
+        actions = np.array([learner(o) for o in observations[:500]])
+        return np.mean((actions[:, 6] - labels[:500, 6]) ** 2)
+
+    assert gripper_error(8.0) < gripper_error(1.0)
+
+
+def test_workers_roll_out_and_evaluate_the_episodes_the_serial_loop_does():
+    from fr5_rl.envs import FR5Env
+    from fr5_rl.expert import ScriptedExpert
+
+    env = FR5Env(task="grasp")
+    observations, labels, success = imitation.rollouts(env, ScriptedExpert(env), None, 3, 500, 1.0,
+                                                       np.random.default_rng(0))
+    algo_kwargs = {"n_steps": 64, "batch_size": 64, "policy_kwargs": {"net_arch": {"pi": [32], "vf": [16]}}}
+    normaliser = imitation.Normaliser(observations)
+    model, _ = imitation.build_model_and_stats("grasp", {}, algo_kwargs, normaliser, seed=0)
+    imitation.fit(model, normaliser, observations, labels, epochs=2)
+    serial_rate = imitation.evaluate(env, imitation.make_learner(model, normaliser), 3, 900)
+    workers = imitation.RolloutWorkers(2, "grasp", {"training": {}, "task": {}})
+    try:
+        # The expert alone: no draw decides who acts, so the data are the serial loop's exactly.
+        parallel = workers.rollouts(None, 3, 500, 1.0, np.random.default_rng(0))
+        parallel_rate = workers.evaluate("task", imitation.ActorSnapshot(model, normaliser), 3, 900)
+    finally:
+        workers.close()
+    np.testing.assert_array_equal(parallel[0], observations)
+    np.testing.assert_array_equal(parallel[1], labels)
+    assert parallel[2] == pytest.approx(success)
+    assert parallel_rate == pytest.approx(serial_rate)
+
+
+def test_workers_below_one_are_refused(capsys):
+    assert imitate.main(["--workers", "0"]) == 2
+    assert "--workers must be at least 1" in capsys.readouterr().err
+
+
+def test_a_run_with_workers_gives_a_loadable_model(tmp_path):
+    run = tmp_path / "run"
+    assert imitate.main(["--task", "grasp", "--rounds", "1", "--episodes", "2", "--epochs", "1",
+                         "--eval-episodes", "2", "--workers", "2", "--run-dir", str(run)]) == 0
+    summary = json.loads((run / "summary.json").read_text())
+    assert [h["round"] for h in summary["history"]] == [0, 1]
+    assert load_policy(run / "final", "torch").observation_size == 24

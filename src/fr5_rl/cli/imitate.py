@@ -30,6 +30,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--epochs", type=int, default=None, help="fitting epochs per round (default: the file's)")
     parser.add_argument("--eval-episodes", type=int, default=50, help="evaluation episodes per round (50)")
     parser.add_argument("--torch-threads", type=int, default=1, help="(1)")
+    parser.add_argument("--workers", type=int, default=1,
+                        help="processes rolling out and evaluating episodes (1: serially, in this one)")
     parser.add_argument("--robot", choices=robot_names(), default=None,
                         help="the arm (config/robots/); default: the DAgger file's env.robot, else fr5")
     return parser
@@ -39,11 +41,14 @@ def dagger_run(args: argparse.Namespace) -> DaggerRun:
     """The command line's options as a :class:`DaggerRun`."""
     return DaggerRun(task=args.task, hyperparams=args.hyperparams, run_dir=args.run_dir, seed=args.seed,
                      rounds=args.rounds, episodes=args.episodes, epochs=args.epochs,
-                     eval_episodes=args.eval_episodes, torch_threads=args.torch_threads, robot=args.robot)
+                     eval_episodes=args.eval_episodes, torch_threads=args.torch_threads, robot=args.robot,
+                     workers=args.workers)
 
 
 def main(argv: Optional[List[str]] = None) -> int:
     args = build_parser().parse_args(script_args(argv))
+    if args.workers < 1:
+        return fail("imitate.py", ValueError(f"--workers must be at least 1, got {args.workers}"))
     from ..training.imitation import run_dagger
 
     try:

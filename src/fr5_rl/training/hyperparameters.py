@@ -108,6 +108,9 @@ class Hyperparameters:
         return dataclasses.asdict(self)
 
 
+LEARNING_RATE_SCHEDULES = ("constant", "cosine")
+
+
 @dataclass(frozen=True)
 class DaggerSettings:
     """The ``dagger`` section of ``config/dagger_<task>.yaml``."""
@@ -117,12 +120,21 @@ class DaggerSettings:
     epochs: int
     learning_rate: float
     expert_share_decay: float
+    # "constant", or "cosine": each round's fit anneals the rate to zero, so the round ends on a
+    # settled fit rather than wherever the last minibatches left it.
+    learning_rate_schedule: str = "constant"
+    # The gripper component's weight in the regression loss (the arm's six weigh 1 each): a
+    # half-closed command drops a thin object or fails to hold a wide one.
+    gripper_loss_weight: float = 1.0
 
     def check(self, source: str) -> None:
         check_positive(source, rounds=self.rounds, episodes=self.episodes, epochs=self.epochs,
-                  learning_rate=self.learning_rate)
+                  learning_rate=self.learning_rate, gripper_loss_weight=self.gripper_loss_weight)
         if not 0.0 <= self.expert_share_decay <= 1.0:
             raise ConfigError(f"{source}: 'dagger.expert_share_decay' must be in [0, 1]")
+        if self.learning_rate_schedule not in LEARNING_RATE_SCHEDULES:
+            raise ConfigError(f"{source}: 'dagger.learning_rate_schedule' is {self.learning_rate_schedule!r}; "
+                              f"use one of {', '.join(LEARNING_RATE_SCHEDULES)}")
 
 
 @dataclass(frozen=True)

@@ -13,9 +13,10 @@ export_onnx.py and the ROS node take it like any trained model.
 """
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
-from typing import Any, Dict, List, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -65,9 +66,23 @@ class Normaliser:
         return np.clip((observations - self.mean) / np.sqrt(self.var + self.epsilon), -self.clip, self.clip)
 
 
+def learning_rate_at(schedule: str, learning_rate: float, progress: float) -> float:
+    """The fit's rate ``progress`` (0 to 1) of the way through: ``learning_rate`` throughout
+    (``"constant"``), or annealed from it to zero along a half cosine (``"cosine"``)."""
+    if schedule == "cosine":
+        return 0.5 * learning_rate * (1.0 + math.cos(math.pi * progress))
+    return learning_rate
+
+
 def fit(model, normaliser: Normaliser, observations: np.ndarray, labels: np.ndarray, epochs: int,
-        batch_size: int = 256, learning_rate: float = 1e-3, seed: int = 0) -> float:
-    """Regress the PPO actor's mean action onto the expert labels (MSE); returns final loss."""
+        batch_size: int = 256, learning_rate: float = 1e-3, seed: int = 0, schedule: str = "constant",
+        gripper_loss_weight: float = 1.0) -> float:
+    """Regress the PPO actor's mean action onto the expert labels (weighted MSE).
+
+    :param schedule: ``"constant"`` or ``"cosine"`` (the rate annealed to zero over the epochs).
+    :param gripper_loss_weight: the last action component's weight; the arm's weigh 1 each.
+    :return: the mean loss over the last epoch.
+    """
     import torch
 
     torch.manual_seed(seed)
@@ -76,19 +91,30 @@ def fit(model, normaliser: Normaliser, observations: np.ndarray, labels: np.ndar
     optimiser = torch.optim.Adam(parameters, lr=learning_rate)
     x = torch.as_tensor(normaliser(observations), dtype=torch.float32)
     y = torch.as_tensor(np.clip(labels, -1.0, 1.0), dtype=torch.float32)
+    weights = torch.ones(y.shape[1], dtype=torch.float32)
+    weights[-1] = gripper_loss_weight
+    weights = weights / weights.mean()
     generator = torch.Generator().manual_seed(seed)
-    loss_value = float("nan")
+    batches_per_epoch = (len(x) + batch_size - 1) // batch_size
+    total_batches = max(epochs * batches_per_epoch, 1)
+    batch_number = 0
+    epoch_loss = float("nan")
     for _ in range(epochs):
         order = torch.randperm(len(x), generator=generator)
+        loss_sum = 0.0
         for start in range(0, len(x), batch_size):
+            for group in optimiser.param_groups:
+                group["lr"] = learning_rate_at(schedule, learning_rate, batch_number / total_batches)
             index = order[start:start + batch_size]
             latent = policy.mlp_extractor.forward_actor(policy.extract_features(x[index], policy.pi_features_extractor))
-            loss = torch.mean((policy.action_net(latent) - y[index]) ** 2)
+            loss = torch.mean(weights * (policy.action_net(latent) - y[index]) ** 2)
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()
-            loss_value = float(loss.detach())
-    return loss_value
+            loss_sum += float(loss.detach()) * len(index)
+            batch_number += 1
+        epoch_loss = loss_sum / max(len(x), 1)
+    return epoch_loss
 
 
 def make_learner(model, normaliser: Normaliser):
@@ -104,6 +130,107 @@ def make_learner(model, normaliser: Normaliser):
             return np.clip(policy.action_net(latent).numpy()[0], -1.0, 1.0)
 
     return act
+
+
+class ActorSnapshot:
+    """The learner's deterministic actor, detached from its PPO model so that it pickles into the
+    rollout workers: the actor's layers and the observation statistics. Its arithmetic is
+    :func:`make_learner`'s (MlpPolicy's feature extractor only flattens a 1-D observation)."""
+
+    def __init__(self, model, normaliser: Normaliser) -> None:
+        import copy
+
+        self.policy_net = copy.deepcopy(model.policy.mlp_extractor.policy_net)
+        self.action_net = copy.deepcopy(model.policy.action_net)
+        self.normaliser = normaliser
+
+    def __call__(self, observation: np.ndarray) -> np.ndarray:
+        import torch
+
+        with torch.no_grad():
+            x = torch.as_tensor(self.normaliser(observation[None]), dtype=torch.float32)
+            return np.clip(self.action_net(self.policy_net(x)).numpy()[0], -1.0, 1.0)
+
+
+_worker_envs: Dict[str, Any] = {}
+
+
+def _start_worker(task: str, overrides: Dict[str, Dict[str, Any]]) -> None:
+    """A rollout worker's set-up: one environment per name (the training one is ``"training"``)."""
+    import torch
+
+    from ..envs import FR5Env
+
+    torch.set_num_threads(1)
+    for name, config in overrides.items():
+        _worker_envs[name] = FR5Env(task=task, config=config)
+
+
+def _worker_rollouts(first_episode: int, episodes: int, seed: int, expert_probability: float,
+                     rng_seed: Sequence[int], learner: Optional[ActorSnapshot]):
+    from ..expert import ScriptedExpert
+
+    env = _worker_envs["training"]
+    rng = np.random.default_rng(list(rng_seed))
+    return rollouts(env, ScriptedExpert(env), learner, episodes, seed + first_episode, expert_probability, rng)
+
+
+def _worker_evaluate(env_name: str, first_episode: int, episodes: int, seed: int, learner: ActorSnapshot) -> int:
+    return round(evaluate(_worker_envs[env_name], learner, episodes, seed + first_episode) * episodes)
+
+
+def _chunks(episodes: int, count: int) -> List[Tuple[int, int]]:
+    """``episodes`` split into at most ``count`` contiguous (first, length) runs, as even as can be."""
+    count = max(1, min(count, episodes))
+    base, extra = divmod(episodes, count)
+    chunks, first = [], 0
+    for index in range(count):
+        length = base + (1 if index < extra else 0)
+        chunks.append((first, length))
+        first += length
+    return chunks
+
+
+class RolloutWorkers:
+    """DAgger's episodes spread over worker processes, each with its own environments.
+
+    The episodes keep their seeds (``seed + episode``) whatever the count; each worker's share of
+    expert steps draws from its own generator, seeded from the run's, so a run's labels depend on
+    the worker count but are reproducible for a given one. With one worker nothing is started:
+    the caller runs the serial functions (:func:`rollouts`, :func:`evaluate`), as before workers.
+
+    :param count: worker processes (at least 2 to start any).
+    :param task: the task of every environment.
+    :param overrides: environment name -> its configuration overrides; ``"training"`` is the
+        one DAgger rolls out in, the others are evaluated in.
+    """
+
+    def __init__(self, count: int, task: str, overrides: Dict[str, Dict[str, Any]]) -> None:
+        import multiprocessing
+
+        self.count = count
+        self._pool = multiprocessing.get_context("forkserver").Pool(count, _start_worker, (task, overrides))
+
+    def rollouts(self, learner: Optional[ActorSnapshot], episodes: int, seed: int, expert_probability: float,
+                 rng: np.random.Generator) -> Tuple[np.ndarray, np.ndarray, float]:
+        """As :func:`rollouts`, over the workers."""
+        base_seed = int(rng.integers(2 ** 31))
+        jobs = [(first, length, seed, expert_probability, (base_seed, index), learner)
+                for index, (first, length) in enumerate(_chunks(episodes, self.count))]
+        parts = self._pool.starmap(_worker_rollouts, jobs)
+        observations = np.concatenate([part[0] for part in parts])
+        labels = np.concatenate([part[1] for part in parts])
+        successes = sum(part[2] * length for part, (_, length, *_rest) in zip(parts, jobs))
+        return observations, labels, successes / max(episodes, 1)
+
+    def evaluate(self, env_name: str, learner: ActorSnapshot, episodes: int, seed: int) -> float:
+        """As :func:`evaluate`, in the workers' environment ``env_name``."""
+        jobs = [(env_name, first, length, seed, learner) for first, length in _chunks(episodes, self.count)]
+        return sum(self._pool.starmap(_worker_evaluate, jobs)) / max(episodes, 1)
+
+    def close(self) -> None:
+        self._pool.close()
+        self._pool.join()
 
 
 def build_model_and_stats(task: str, env_overrides: Dict[str, Any], algo_kwargs: Dict[str, Any],
@@ -173,7 +300,17 @@ def run_dagger(run: DaggerRun) -> int:
     if env_overrides:
         eval_envs["training_env"] = FR5Env(task=run.task, config=env_overrides)
     expert = ScriptedExpert(env)
-    observations, labels, expert_success = rollouts(env, expert, None, episodes, run.seed, 1.0, rng)
+    workers = None
+    if run.workers > 1:
+        workers = RolloutWorkers(run.workers, run.task, {"training": env_overrides, "task": plain_overrides,
+                                                         **({"training_env": env_overrides} if env_overrides else {})})
+
+    def roll_out(learner, round_seed: int, expert_probability: float):
+        if workers is None:
+            return rollouts(env, expert, learner, episodes, round_seed, expert_probability, rng)
+        return workers.rollouts(learner, episodes, round_seed, expert_probability, rng)
+
+    observations, labels, expert_success = roll_out(None, run.seed, 1.0)
     print(f"round 0: expert demonstrations, {len(observations)} samples, expert success {expert_success:.0%}")
     history = [{"round": 0, "samples": len(observations), "driver_success": expert_success,
                 "wall_s": round(time.time() - t_start, 1)}]
@@ -184,10 +321,15 @@ def run_dagger(run: DaggerRun) -> int:
         if model is None:
             model, venv = build_model_and_stats(run.task, env_overrides, config.algo_kwargs, normaliser, run.seed)
         loss = fit(model, normaliser, observations, labels, epochs, seed=run.seed + round_index,
-                   learning_rate=dagger.learning_rate)
-        learner = make_learner(model, normaliser)
-        rates = {name: evaluate(e, learner, run.eval_episodes, run.seed + EVAL_SEED_OFFSET)
-                 for name, e in eval_envs.items()}
+                   learning_rate=dagger.learning_rate, schedule=dagger.learning_rate_schedule,
+                   gripper_loss_weight=dagger.gripper_loss_weight)
+        learner = make_learner(model, normaliser) if workers is None else ActorSnapshot(model, normaliser)
+        if workers is None:
+            rates = {name: evaluate(e, learner, run.eval_episodes, run.seed + EVAL_SEED_OFFSET)
+                     for name, e in eval_envs.items()}
+        else:
+            rates = {name: workers.evaluate(name, learner, run.eval_episodes, run.seed + EVAL_SEED_OFFSET)
+                     for name in eval_envs}
         success = sum(rates.values()) / len(rates)
         sync_stats(venv, normaliser)
         meta = build_meta(run.task, "ppo", env_overrides, env.cfg, env.observation_space.shape[0],
@@ -211,9 +353,11 @@ def run_dagger(run: DaggerRun) -> int:
             break
         # The learner drives (with a decaying share of expert steps), the expert labels.
         beta = dagger.expert_share_decay ** round_index
-        new_obs, new_labels, _ = rollouts(env, expert, learner, episodes, run.seed + 1000 * round_index, beta, rng)
+        new_obs, new_labels, _ = roll_out(learner, run.seed + 1000 * round_index, beta)
         observations = np.concatenate([observations, new_obs])
         labels = np.concatenate([labels, new_labels])
+    if workers is not None:
+        workers.close()
     env.close()
     for e in eval_envs.values():
         e.close()

@@ -197,6 +197,9 @@ class DaggerRun:
     :param eval_episodes: evaluation episodes per round (and per evaluated environment).
     :param torch_threads: threads of torch's CPU operations.
     :param robot: the arm (``config/robots/``), over the DAgger file's ``env.robot``; None: the file's, else fr5.
+    :param workers: processes that roll out and evaluate episodes; 1: in this process, serially
+        (the labels then match runs from before workers existed; with more they depend on the
+        count, reproducibly).
     """
 
     task: str = "grasp"
@@ -209,3 +212,4 @@ class DaggerRun:
     eval_episodes: int = 50
     torch_threads: int = 1
     robot: Optional[str] = None
+    workers: int = 1
