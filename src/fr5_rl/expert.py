@@ -16,6 +16,12 @@ from .kinematics import InverseKinematics
 from .objects import yaw_of
 
 
+def env_command_open(env, share: float = 0.25) -> bool:
+    """Whether the gripper's last command (in the observation) is at least ``share`` of the way
+    open."""
+    return env.episode.gripper_command_width >= share * env.robot_spec.max_opening_width
+
+
 class ScriptedExpert:
     """Waypoint expert: above the object -> down to it -> (grasp) close -> lift and hold.
 
@@ -43,6 +49,7 @@ class ScriptedExpert:
     # (about 0.1 of an action, what its fit is off by).
     min_step = 0.005
     release_height = 0.006  # m above its rest under which a carried object is let go
+    keep_releasing_within = 0.018  # m from the goal within which letting go, once begun, goes on
     phase_speed = {"hover": 0.015, "descend": 0.006, "close": 0.006, "lift": 0.006,
                    "carry": 0.008, "lower": 0.004, "release": 0.004, "retreat": 0.008}
 
@@ -78,8 +85,11 @@ class ScriptedExpert:
         grasp_z = object_z + grasp_offset
         dx, dy, dz = object_x - tcp_x, object_y - tcp_y, grasp_z - tcp_z  # to the grasp point
         horizontal_error = math.sqrt(dx * dx + dy * dy)
-        held = grasp and state.fingers_object_contact == 2 and \
-            env.episode.gripper_command_width < env.robot_spec.max_opening_width / 2.0
+        # Held: both pads on it, and the fingers commanded closed or the object off the table (a
+        # learner's half-open command on a lifted object is told to close, not to grasp anew).
+        lifted = object_z - state.object_start_position[2] > 2.0 * self.release_height
+        held = grasp and state.fingers_object_contact == 2 and (
+            lifted or env.episode.gripper_command_width < env.robot_spec.max_opening_width / 2.0)
         placing = self._place_phase(state, held) if env.task.name == "place" else None
         if placing is not None:
             phase, target = placing
@@ -88,9 +98,10 @@ class ScriptedExpert:
             target = (object_x, object_y, state.object_start_position[2] + grasp_offset + self.lift_clearance)
         elif grasp and self._closing(math.sqrt(dx * dx + dy * dy + dz * dz)):
             phase, target = "close", (object_x, object_y, grasp_z)
-        elif horizontal_error < self.align_tolerance + 0.5 * max(tcp_z - grasp_z, 0.0):
-            # A funnel: the higher above the grasp point, the more lateral error is fine, since
-            # the straight line down removes it on the way.
+        elif horizontal_error < self.align_tolerance + 0.5 * max(tcp_z - grasp_z - self._top_above_grasp(grasp_offset), 0.0):
+            # A funnel: the higher above the object's top, the more lateral error is fine, since
+            # the straight line down removes it on the way; from the top down, aligned (a funnel
+            # ending at the grasp point let a finger land on a tall object's top, and stall).
             phase, target = "descend", (object_x, object_y, grasp_z)
         else:
             phase, target = "hover", (object_x, object_y, object_z + self.hover_height)
@@ -124,6 +135,11 @@ class ScriptedExpert:
         closing = self.env.episode.gripper_command_width < 0.9 * self.env.robot_spec.max_opening_width
         return closing and to_grasp_point < self.keep_closing_within
 
+    def _top_above_grasp(self, grasp_offset: float) -> float:
+        """m from the grasp point up to the object's top (0 without an object shape)."""
+        shape = self.env.episode.plant.object_shape
+        return max(shape.size[2] / 2.0 - grasp_offset, 0.0) if shape is not None else 0.0
+
     def _grasp_offset(self) -> float:
         """m above the object's centre where the fingers close: ``grasp_height_offset``, or
         higher on a tall object, ``finger_reach`` below its top."""
@@ -149,7 +165,12 @@ class ScriptedExpert:
             carry_z = rest_hand_z + self.lift_clearance
             if to_goal > 2.0 * self.lift_clearance / self.descent_slope and tcp_z < carry_z - 0.02:
                 return "carry", (tcp_x, tcp_y, carry_z)  # far from the goal: up to the carry height first
-            if above_rest > self.release_height or to_goal > self.place_tolerance:
+            # Releasing, once begun (the fingers commanded at least a quarter open: observable),
+            # goes on over a wider band: a learner at the band's edge was told to open and to
+            # close in turn, and hovered half open.
+            releasing = env_command_open(self.env) and above_rest <= 2.0 * self.release_height \
+                and to_goal <= self.keep_releasing_within
+            if not releasing and (above_rest > self.release_height or to_goal > self.place_tolerance):
                 # Over the goal along a cone: the nearer, the lower, down to 1 mm below the rest
                 # (pressing further slides the object up into the palm). A cone, not a step from
                 # carrying to lowering: an imitating policy averaged the two at the step and hovered.
