@@ -173,3 +173,64 @@ def test_the_objects_torsional_friction_is_the_tasks(task, expected):
         assert spinning == pytest.approx(expected)
     finally:
         env.close()
+
+
+class TestTheExpertsLabelsWhereLearnersStalled:
+    """States a learner reached and stalled in (the place model of stop 58 hovered or froze
+    there), built from a reset state; the expert's label must point one way out."""
+
+    @pytest.fixture()
+    def tall_cylinder(self):
+        env = FR5Env("place", config={"object": {"variety": {"enabled": True, "kinds": ["cylinder"]}}})
+        for seed in range(200):
+            env.reset(seed=seed)
+            if env.episode.plant.object_shape.size[2] > 0.10:
+                yield env
+                env.close()
+                return
+        pytest.fail("no cylinder taller than 10 cm drawn")
+
+    @staticmethod
+    def label(env, monkeypatch, command_width=None, **state_changes):
+        state = dataclasses.replace(env.task_state(), **state_changes)
+        monkeypatch.setattr(env, "task_state", lambda: state)
+        if command_width is not None:
+            monkeypatch.setattr(env.episode.chain, "gripper_command_width", command_width)
+        expert = ScriptedExpert(env)
+        action = expert.act()
+        return expert.phase, action
+
+    def test_over_a_tall_object_it_aligns_before_its_fingers_reach_the_top(self, tall_cylinder, monkeypatch):
+        env = tall_cylinder
+        x, y, z = env.task_state().object_position
+        top = z + env.episode.plant.object_shape.size[2] / 2.0
+        # The pads' tips are about 1 cm below the tcp: 2 cm above the top, 1.8 cm to the side.
+        phase, _ = self.label(env, monkeypatch, tcp_position=(x + 0.018, y, top + 0.02))
+        assert phase == "hover"
+        phase, _ = self.label(env, monkeypatch, tcp_position=(x + 0.004, y, top + 0.02))
+        assert phase == "descend"
+
+    def test_a_lifted_object_in_both_pads_is_held_whatever_the_command(self, place, monkeypatch):
+        place.reset(seed=3)
+        state = place.task_state()
+        lifted = (state.object_position[0], state.object_position[1], state.object_position[2] + 0.03)
+        half_open = 0.6 * place.robot_spec.max_opening_width
+        phase, action = self.label(place, monkeypatch, command_width=half_open, object_position=lifted,
+                                   fingers_object_contact=2,
+                                   tcp_position=(lifted[0], lifted[1], lifted[2] + 0.02))
+        assert phase in ("carry", "lower") and action[6] == -1.0
+
+    def test_letting_go_once_begun_goes_on_over_a_wider_band(self, place, monkeypatch):
+        place.reset(seed=3)
+        state = place.task_state()
+        goal_x, goal_y, _ = place.task.goal
+        rest_z = state.object_start_position[2]
+        # 15 mm from the goal (beyond the 12 mm where a closed hand lets go), 4 mm above the table.
+        carried = (goal_x + 0.015, goal_y, rest_z + 0.004)
+        common = dict(object_position=carried, fingers_object_contact=2,
+                      tcp_position=(carried[0], carried[1], carried[2] + 0.02))
+        width = place.robot_spec.max_opening_width
+        phase, action = self.label(place, monkeypatch, command_width=0.0, **common)
+        assert phase == "lower" and action[6] == -1.0
+        phase, action = self.label(place, monkeypatch, command_width=0.4 * width, **common)
+        assert phase == "release" and action[6] == 1.0

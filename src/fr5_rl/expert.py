@@ -35,7 +35,8 @@ class ScriptedExpert:
     grasp_height_offset = 0.015  # m above the object centre where the fingers close
     # ... but no lower than this below a tall object's top: the pads reach this far down before
     # the palm touches the top.
-    finger_reach = 0.025  # (1.5 cm short of the palm: a learner one step late still cleared it at 3 cm less 1)
+    finger_reach = 0.025  # 1.5 cm short of where the palm meets the top: at 1 cm a learner a step late hit it
+    pad_tips_below_tcp = 0.01  # m (urdf: the pads reach 1 cm beyond the tcp)
     align_tolerance = 0.01  # m horizontal error under which the expert descends
     at_grasp_tolerance = 0.008  # m from the grasp point under which it closes
     keep_closing_within = 0.02  # m from the grasp point under which it keeps closing once begun
@@ -99,7 +100,7 @@ class ScriptedExpert:
         elif grasp and self._closing(math.sqrt(dx * dx + dy * dy + dz * dz)):
             phase, target = "close", (object_x, object_y, grasp_z)
         elif horizontal_error < self.align_tolerance + 0.5 * max(tcp_z - grasp_z - self._top_above_grasp(grasp_offset), 0.0):
-            # A funnel: the higher above the object's top, the more lateral error is fine, since
+            # A funnel: the higher the pads' tips above the object's top, the more lateral error is fine, since
             # the straight line down removes it on the way; from the top down, aligned (a funnel
             # ending at the grasp point let a finger land on a tall object's top, and stall).
             phase, target = "descend", (object_x, object_y, grasp_z)
@@ -136,9 +137,11 @@ class ScriptedExpert:
         return closing and to_grasp_point < self.keep_closing_within
 
     def _top_above_grasp(self, grasp_offset: float) -> float:
-        """m from the grasp point up to the object's top (0 without an object shape)."""
+        """m the tcp is above the grasp point when the pads' tips reach the object's top (0
+        without an object shape)."""
         shape = self.env.episode.plant.object_shape
-        return max(shape.size[2] / 2.0 - grasp_offset, 0.0) if shape is not None else 0.0
+        top = max(shape.size[2] / 2.0 - grasp_offset, 0.0) if shape is not None else 0.0
+        return top + self.pad_tips_below_tcp
 
     def _grasp_offset(self) -> float:
         """m above the object's centre where the fingers close: ``grasp_height_offset``, or
