@@ -234,3 +234,23 @@ class TestTheExpertsLabelsWhereLearnersStalled:
         assert phase == "lower" and action[6] == -1.0
         phase, action = self.label(place, monkeypatch, command_width=0.4 * width, **common)
         assert phase == "release" and action[6] == 1.0
+
+    def test_at_the_funnels_edge_the_label_closes_in_sideways_not_up_and_over(self, place, monkeypatch):
+        """Just outside the descent funnel the old label went 10 cm up, just inside straight down;
+        a learner averaged them and sank beside the object. Along the cone it moves in."""
+        place.reset(seed=3)
+        state = place.task_state()
+        expert = ScriptedExpert(place)
+        x, y, z = state.object_position
+        grasp_z = z + expert._grasp_offset()
+        apex = grasp_z + expert._top_above_grasp(expert._grasp_offset())
+        height = apex + 0.02
+        error = expert.align_tolerance + expert.funnel_slope * 0.02 + 0.002
+        start = (x + error, y, height)
+        # Joints that put the tcp there, pointing down.
+        q = expert._inverse_kinematics(start, state.joint_positions)
+        _, action = self.label(place, monkeypatch, tcp_position=start, joint_positions=q)
+        moved = place.kinematics.tcp_pose(np.asarray(q) + action[:6] * place.cfg.action.max_joint_step)[0] \
+            - place.kinematics.tcp_pose(q)[0]
+        assert moved[0] < -0.002  # toward the object
+        assert abs(moved[2]) < 0.5 * abs(moved[0]), moved

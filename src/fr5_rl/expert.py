@@ -37,7 +37,8 @@ class ScriptedExpert:
     # the palm touches the top.
     finger_reach = 0.025  # 1.5 cm short of where the palm meets the top: at 1 cm a learner a step late hit it
     pad_tips_below_tcp = 0.01  # m (urdf: the pads reach 1 cm beyond the tcp)
-    align_tolerance = 0.01  # m horizontal error under which the expert descends
+    align_tolerance = 0.01  # m horizontal error at which the pads' tips may reach the object's top
+    funnel_slope = 0.5  # m of horizontal error allowed per m of height above that
     at_grasp_tolerance = 0.008  # m from the grasp point under which it closes
     keep_closing_within = 0.02  # m from the grasp point under which it keeps closing once begun
     # Cartesian speed per phase (m per 20 ms control step): fast in free space, slow near the
@@ -99,21 +100,29 @@ class ScriptedExpert:
             target = (object_x, object_y, state.object_start_position[2] + grasp_offset + self.lift_clearance)
         elif grasp and self._closing(math.sqrt(dx * dx + dy * dy + dz * dz)):
             phase, target = "close", (object_x, object_y, grasp_z)
-        elif horizontal_error < self.align_tolerance + 0.5 * max(tcp_z - grasp_z - self._top_above_grasp(grasp_offset), 0.0):
-            # A funnel: the higher the pads' tips above the object's top, the more lateral error is fine, since
-            # the straight line down removes it on the way; from the top down, aligned (a funnel
-            # ending at the grasp point let a finger land on a tall object's top, and stall).
-            phase, target = "descend", (object_x, object_y, grasp_z)
         else:
-            phase, target = "hover", (object_x, object_y, object_z + self.hover_height)
+            # Toward the object along a cone: the further off to the side, the higher above it
+            # (2 m per m beyond align_tolerance; the pads' tips level with the top at
+            # align_tolerance; the grasp point straight above it). A height that is a function of
+            # the error, not a step from "hover up there" to "descend": a learner averaged the two
+            # at the step and sank beside the object.
+            top_above = self._top_above_grasp(grasp_offset)
+            cone_height = grasp_z + top_above * min(1.0, horizontal_error / self.align_tolerance) \
+                + max(horizontal_error - self.align_tolerance, 0.0) / self.funnel_slope
+            target = (object_x, object_y, min(cone_height, object_z + self.hover_height))
+            # Named (and timed) by the funnel: the higher the pads' tips above the top, the more
+            # lateral error the straight line down removes on the way.
+            aligned = horizontal_error < self.align_tolerance + self.funnel_slope * max(tcp_z - grasp_z - top_above, 0.0)
+            phase = "descend" if aligned else "hover"
         self.phase = phase
         # Straight-line Cartesian motion: IK for a point a short step along the line, slowing
         # down over the last centimetres.
         offset_x, offset_y, offset_z = target[0] - tcp_x, target[1] - tcp_y, target[2] - tcp_z
         distance = math.sqrt(offset_x * offset_x + offset_y * offset_y + offset_z * offset_z)
         speed = self.phase_speed[phase]
-        if phase == "descend" and tcp_z - grasp_z > 0.06:
-            speed = self.phase_speed["hover"]  # slow only for the last centimetres
+        if phase in ("hover", "descend"):
+            # Fast in free space, slow over the last centimetres, aligned or not.
+            speed = self.phase_speed["hover" if tcp_z - grasp_z > 0.06 else "descend"]
         step = min(speed, max(0.35 * distance, min(distance, self.min_step)))
         if distance > step:
             fraction = step / distance
@@ -181,7 +190,12 @@ class ScriptedExpert:
                 phase = "carry" if to_goal > self.place_funnel else "lower"
                 return phase, (*hand_over_goal, rest_hand_z - 0.001 + height)
             return "release", (tcp_x, tcp_y, tcp_z)
-        if to_goal <= task.settings.position_tolerance and abs(object_z - start_z) < 0.005:
+        # Set down near the goal; or letting go, begun (as above), with the object still in the
+        # pads a little above the table: go on opening (re-grasping there was the other label a
+        # learner was given, and it hovered half open).
+        letting_go = env_command_open(self.env) and to_goal <= self.keep_releasing_within \
+            and object_z - start_z <= 2.0 * self.release_height
+        if letting_go or (to_goal <= task.settings.position_tolerance and abs(object_z - start_z) < 0.005):
             if state.gripper_width < 0.9 * self.env.robot_spec.max_opening_width:
                 return "release", (tcp_x, tcp_y, tcp_z)  # the fingers still opening
             return "retreat", (tcp_x, tcp_y, object_z + self.hover_height)
