@@ -230,7 +230,13 @@ class ScriptedExpert:
             error = error - period if error > period / 2.0 else error
             wanted = tcp_yaw + error
         elif phase in ("hover", "descend", "close", "lift"):
-            wanted = object_yaw + period * round((home_yaw - object_yaw) / period)
+            # Of the yaws the top's symmetry makes equal, the nearest to the hand's own: what the
+            # observation's (sin kΔ, cos kΔ) tells apart. Nearest to home's, the label asked a
+            # hand that had turned the other way to turn a quarter back over a square it was
+            # already aligned with, and the learner froze.
+            current = self.env.kinematics.tcp_pose(state.joint_positions)[1]
+            tcp_yaw = math.atan2(current[1, 0], current[0, 0])
+            wanted = object_yaw + period * round((tcp_yaw - object_yaw) / period)
         else:  # letting go and rising clear: keep the hand's yaw
             current = self.env.kinematics.tcp_pose(state.joint_positions)[1]
             wanted = math.atan2(current[1, 0], current[0, 0])
