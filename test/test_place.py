@@ -254,3 +254,44 @@ class TestTheExpertsLabelsWhereLearnersStalled:
             - place.kinematics.tcp_pose(q)[0]
         assert moved[0] < -0.002  # toward the object
         assert abs(moved[2]) < 0.5 * abs(moved[0]), moved
+
+    def test_over_a_square_top_the_hand_keeps_the_aligned_yaw_it_has(self, monkeypatch):
+        """A square top looks the same every quarter turn, and so does the observation's
+        (sin 4Δ, cos 4Δ); a hand aligned a quarter turn from home's choice is told not to turn."""
+        from fr5_rl.objects import yaw_of
+
+        env = FR5Env("grasp", config={"object": {"variety": {"enabled": True, "kinds": ["box"]}}})
+        try:
+            for seed in range(100):
+                env.reset(seed=seed)
+                if env.episode.plant.object_shape.symmetry_order == 4:
+                    break
+            else:
+                pytest.fail("no square top drawn")
+            state = env.task_state()
+            object_yaw = yaw_of(state.object_quaternion)
+
+            def tcp_yaw(q):
+                rotation = env.kinematics.tcp_pose(q)[1]
+                return math.atan2(rotation[1, 0], rotation[0, 0])
+
+            q = np.asarray(state.joint_positions, dtype=float)
+            # Turn the wrist so that the hand lines up with the top a quarter turn away from
+            # where the home-nearest choice would put it.
+            home_choice = object_yaw + (math.pi / 2) * round((tcp_yaw(q) - object_yaw) / (math.pi / 2))
+            def wrapped(angle):
+                return (angle + math.pi) % (2 * math.pi) - math.pi
+
+            target = home_choice + math.pi / 2
+            turned = q.copy()
+            for _ in range(5):  # the wrist turns the tcp's yaw the other way, nearly one for one
+                turned[5] -= wrapped(target - tcp_yaw(turned))
+            assert abs(wrapped(tcp_yaw(turned) - target)) < 1e-3
+            x, y, z = state.object_position
+            tcp = env.kinematics.tcp_pose(turned)[0]
+            _, action = self.label(env, monkeypatch, joint_positions=tuple(turned), tcp_position=tuple(tcp))
+            stepped = np.asarray(turned) + action[:6] * env.cfg.action.max_joint_step
+            turn = (tcp_yaw(stepped) - tcp_yaw(turned) + math.pi) % (2 * math.pi) - math.pi
+            assert abs(math.degrees(turn)) < 0.3, math.degrees(turn)
+        finally:
+            env.close()
