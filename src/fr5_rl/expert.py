@@ -36,6 +36,7 @@ class ScriptedExpert:
     # ... but no lower than this below a tall object's top: the pads reach this far down before
     # the palm touches the top.
     finger_reach = 0.025  # 1.5 cm short of where the palm meets the top: at 1 cm a learner a step late hit it
+    max_turn_step = 0.03  # rad the hand's yaw is asked to turn per step (the wrist may do 0.04)
     pad_tips_below_tcp = 0.01  # m (urdf: the pads reach 1 cm beyond the tcp)
     align_tolerance = 0.01  # m horizontal error at which the pads' tips may reach the object's top
     funnel_slope = 0.5  # m of horizontal error allowed per m of height above that
@@ -222,10 +223,10 @@ class ScriptedExpert:
         period = 2.0 * math.pi / order
         home_yaw = math.atan2(self._down_rotation[3], self._down_rotation[0])
         object_yaw = yaw_of(state.object_quaternion)
+        current = self.env.kinematics.tcp_pose(state.joint_positions)[1]
+        tcp_yaw = math.atan2(current[1, 0], current[0, 0])
         if held and self.env.task.name == "place" and phase in ("carry", "lower"):
             # The object turns with the hand: turn the hand by the object's yaw error to the goal.
-            current = self.env.kinematics.tcp_pose(state.joint_positions)[1]
-            tcp_yaw = math.atan2(current[1, 0], current[0, 0])
             error = (self.env.task.goal[2] - object_yaw) % period
             error = error - period if error > period / 2.0 else error
             wanted = tcp_yaw + error
@@ -234,12 +235,15 @@ class ScriptedExpert:
             # observation's (sin kΔ, cos kΔ) tells apart. Nearest to home's, the label asked a
             # hand that had turned the other way to turn a quarter back over a square it was
             # already aligned with, and the learner froze.
-            current = self.env.kinematics.tcp_pose(state.joint_positions)[1]
-            tcp_yaw = math.atan2(current[1, 0], current[0, 0])
             wanted = object_yaw + period * round((tcp_yaw - object_yaw) / period)
         else:  # letting go and rising clear: keep the hand's yaw
-            current = self.env.kinematics.tcp_pose(state.joint_positions)[1]
-            wanted = math.atan2(current[1, 0], current[0, 0])
+            wanted = tcp_yaw
+        # At most max_turn_step a step: a large turn scaled the whole joint step down (the wrist's
+        # share decides the scale) and left the translation a few hundredths of an action; where
+        # the turn's direction flips (half a period off, either way is as near) a learner
+        # averaged the two turns to nothing, and with them the translation, and froze.
+        change = math.remainder(wanted - tcp_yaw, 2.0 * math.pi)
+        wanted = tcp_yaw + max(-self.max_turn_step, min(self.max_turn_step, change))
         turn = wanted - home_yaw
         cosine, sine = math.cos(turn), math.sin(turn)
         r = self._down_rotation
