@@ -21,6 +21,7 @@ from .drivers.gripper_bridge_params import GripperBridgeParams
 from .env_config import load_env_config
 from .episode import Episode
 from .motion_guard import load_guard_settings
+from .objects import yaw_of
 from .observation import DelayedTarget
 from .sim.controller_emulator import ControllerEmulator
 from .sim.gripper_chain import ChainClock, InProcessController
@@ -220,7 +221,12 @@ class ChainEmulation:
                 self.fresh_state.used(reading)
                 now = self.clock.now
                 target = self._target(camera, now - episode_start_s)
-                result = step(StepInputs(now, reading, target, now, self.fault))
+                # The object's shape and the goal, as the simulator node publishes them (latched,
+                # before the episode's first period).
+                shape = Reading(sim.plant.object_shape, now, stamp=now)
+                goal = sim.scene().goal
+                result = step(StepInputs(now, reading, target, now, self.fault, object_shape=shape,
+                                         goal=None if goal is None else Reading(tuple(goal), now, stamp=now)))
                 if isinstance(result, Command):
                     pending.append((k + self._compute_steps(), result.arm_positions, result.gripper_width,
                                     result.target_in_base is not None))
@@ -259,11 +265,13 @@ class ChainEmulation:
         """The target the node has at this period: the simulator's, or the camera's (stamped
         with its capture time, in the base frame as the node's tf gives it)."""
         now = self.clock.now
+        pose = self.sim.object_pose()
+        yaw = yaw_of(pose.quaternion)  # the detector's and the tracker's, taken as exact
         if camera is None:
-            return Reading(tuple(self.sim.object_pose().position), now, stamp=now)
+            return Reading((*pose.position, yaw), now, stamp=now)
         state = self.sim.task_state()
         held = self.sim.held_as_the_camera_sees(state)
-        position = camera.observe(state.object_position, since_start_s, held,
+        position = camera.observe((*state.object_position, yaw), since_start_s, held,
                                   state.tcp_to_object_distance <= self.hidden_radius)
         return Reading(tuple(position), now, stamp=now - since_start_s + camera.seen_at)
 
