@@ -159,3 +159,20 @@ def test_the_timing_bench_runs_and_writes_its_result(tmp_path):
     assert out.returncode == 0, out.stderr[-2000:]
     result = json.loads((tmp_path / "one.json").read_text())
     assert result["episodes"] == 1 and result["simulator"]["servo_rate"] == 125.0
+
+
+@pytest.mark.parametrize("model", ["grasp_objects", "place"])
+def test_a_model_that_observes_the_objects_shape_and_the_goal_runs_through_the_bench(tmp_path, model):
+    """The object's yaw, its shape and the goal reach the emulated node as the simulator node's
+    topics bring them: without them the node held, and the bench gave up after 120 s."""
+    import json
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, str(package_root() / "tools" / "bench" / "timing.py"), "--model",
+                          f"models/{model}", "--profile", "fairino", "--target", "camera", "--episodes", "1",
+                          "--seed", "1660001", "--results", str(tmp_path), "--name", "one"],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    result = json.loads((tmp_path / "one.json").read_text())
+    assert result["episodes"] == 1 and result["model"].endswith(model) and len(result["records"]) == 1
