@@ -185,6 +185,7 @@ class ChainEmulation:
         else:
             sim.start(seed)
         object_start = sim.object_start
+        scene = sim.scene()
         self._deliver_joint_states(sys.maxsize)  # the pause between episodes outlasts any delivery delay
         # A driver's servo loop runs on across episodes, as the simulator node's does.
         self.driver.reset(sim.joint_positions(), restart_cycle=False)
@@ -223,10 +224,9 @@ class ChainEmulation:
                 target = self._target(camera, now - episode_start_s)
                 # The object's shape and the goal, as the simulator node publishes them (latched,
                 # before the episode's first period).
-                shape = Reading(sim.plant.object_shape, now, stamp=now)
-                goal = sim.scene().goal
-                result = step(StepInputs(now, reading, target, now, self.fault, object_shape=shape,
-                                         goal=None if goal is None else Reading(tuple(goal), now, stamp=now)))
+                shape = Reading(scene.object_description, now, stamp=now)
+                goal = None if scene.goal is None else Reading(tuple(scene.goal), now, stamp=now)
+                result = step(StepInputs(now, reading, target, now, self.fault, object_shape=shape, goal=goal))
                 if isinstance(result, Command):
                     pending.append((k + self._compute_steps(), result.arm_positions, result.gripper_width,
                                     result.target_in_base is not None))
