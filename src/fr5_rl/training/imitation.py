@@ -117,25 +117,10 @@ def fit(model, normaliser: Normaliser, observations: np.ndarray, labels: np.ndar
     return epoch_loss
 
 
-def make_learner(model, normaliser: Normaliser):
-    """Deterministic actor as a function: raw observation -> action in [-1, 1]."""
-    import torch
-
-    policy = model.policy
-
-    def act(observation: np.ndarray) -> np.ndarray:
-        with torch.no_grad():
-            x = torch.as_tensor(normaliser(observation[None]), dtype=torch.float32)
-            latent = policy.mlp_extractor.forward_actor(policy.extract_features(x, policy.pi_features_extractor))
-            return np.clip(policy.action_net(latent).numpy()[0], -1.0, 1.0)
-
-    return act
-
-
 class ActorSnapshot:
-    """The learner's deterministic actor, detached from its PPO model so that it pickles into the
-    rollout workers: the actor's layers and the observation statistics. Its arithmetic is
-    :func:`make_learner`'s (MlpPolicy's feature extractor only flattens a 1-D observation)."""
+    """The learner's deterministic actor as a function (raw observation -> action in [-1, 1]),
+    detached from its PPO model so that it pickles into the rollout workers: the actor's layers and
+    the observation statistics (MlpPolicy's feature extractor only flattens a 1-D observation)."""
 
     def __init__(self, model, normaliser: Normaliser) -> None:
         import copy
@@ -150,6 +135,11 @@ class ActorSnapshot:
         with torch.no_grad():
             x = torch.as_tensor(self.normaliser(observation[None]), dtype=torch.float32)
             return np.clip(self.action_net(self.policy_net(x)).numpy()[0], -1.0, 1.0)
+
+
+def make_learner(model, normaliser: Normaliser) -> ActorSnapshot:
+    """Deterministic actor as a function: raw observation -> action in [-1, 1]."""
+    return ActorSnapshot(model, normaliser)
 
 
 _worker_envs: Dict[str, Any] = {}
@@ -323,7 +313,7 @@ def run_dagger(run: DaggerRun) -> int:
         loss = fit(model, normaliser, observations, labels, epochs, seed=run.seed + round_index,
                    learning_rate=dagger.learning_rate, schedule=dagger.learning_rate_schedule,
                    gripper_loss_weight=dagger.gripper_loss_weight)
-        learner = make_learner(model, normaliser) if workers is None else ActorSnapshot(model, normaliser)
+        learner = make_learner(model, normaliser)
         if workers is None:
             rates = {name: evaluate(e, learner, run.eval_episodes, run.seed + EVAL_SEED_OFFSET)
                      for name, e in eval_envs.items()}
