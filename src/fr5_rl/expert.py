@@ -16,12 +16,6 @@ from .kinematics import InverseKinematics
 from .objects import yaw_of
 
 
-def env_command_open(env, share: float = 0.25) -> bool:
-    """Whether the gripper's last command (in the observation) is at least ``share`` of the way
-    open."""
-    return env.episode.gripper_command_width >= share * env.robot_spec.max_opening_width
-
-
 class ScriptedExpert:
     """Waypoint expert: above the object -> down to it -> (grasp) close -> lift and hold.
 
@@ -146,6 +140,14 @@ class ScriptedExpert:
         closing = self.env.episode.gripper_command_width < 0.9 * self.env.robot_spec.max_opening_width
         return closing and to_grasp_point < self.keep_closing_within
 
+    def _letting_go(self, to_goal: float, above_rest: float) -> bool:
+        """Whether letting go, once begun (the fingers commanded at least a quarter open: in the
+        observation), goes on: within ``keep_releasing_within`` (m) of the goal and twice
+        ``release_height`` above the table. A learner at the edge of the narrower band where a
+        closed hand lets go was told to open and to close in turn, and hovered half open."""
+        opening = self.env.episode.gripper_command_width >= 0.25 * self.env.robot_spec.max_opening_width
+        return opening and above_rest <= 2.0 * self.release_height and to_goal <= self.keep_releasing_within
+
     def _top_above_grasp(self, grasp_offset: float) -> float:
         """m the tcp is above the grasp point when the pads' tips reach the object's top (0
         without an object shape)."""
@@ -178,12 +180,7 @@ class ScriptedExpert:
             carry_z = rest_hand_z + self.lift_clearance
             if to_goal > 2.0 * self.lift_clearance / self.descent_slope and tcp_z < carry_z - 0.02:
                 return "carry", (tcp_x, tcp_y, carry_z)  # far from the goal: up to the carry height first
-            # Releasing, once begun (the fingers commanded at least a quarter open: observable),
-            # goes on over a wider band: a learner at the band's edge was told to open and to
-            # close in turn, and hovered half open.
-            releasing = env_command_open(self.env) and above_rest <= 2.0 * self.release_height \
-                and to_goal <= self.keep_releasing_within
-            if not releasing and (above_rest > self.release_height or to_goal > self.place_tolerance):
+            if not self._letting_go(to_goal, above_rest) and (above_rest > self.release_height or to_goal > self.place_tolerance):
                 # Over the goal along a cone: the nearer, the lower, down to 1 mm below the rest
                 # (pressing further slides the object up into the palm). A cone, not a step from
                 # carrying to lowering: an imitating policy averaged the two at the step and hovered.
@@ -191,12 +188,9 @@ class ScriptedExpert:
                 phase = "carry" if to_goal > self.place_funnel else "lower"
                 return phase, (*hand_over_goal, rest_hand_z - 0.001 + height)
             return "release", (tcp_x, tcp_y, tcp_z)
-        # Set down near the goal; or letting go, begun (as above), with the object still in the
-        # pads a little above the table: go on opening (re-grasping there was the other label a
-        # learner was given, and it hovered half open).
-        letting_go = env_command_open(self.env) and to_goal <= self.keep_releasing_within \
-            and object_z - start_z <= 2.0 * self.release_height
-        if letting_go or (to_goal <= task.settings.position_tolerance and abs(object_z - start_z) < 0.005):
+        # Set down near the goal, or letting go with the object still in the pads a little above
+        # the table: go on opening (re-grasping there was the other label a learner was given).
+        if self._letting_go(to_goal, object_z - start_z) or (to_goal <= task.settings.position_tolerance and abs(object_z - start_z) < 0.005):
             if state.gripper_width < 0.9 * self.env.robot_spec.max_opening_width:
                 return "release", (tcp_x, tcp_y, tcp_z)  # the fingers still opening
             return "retreat", (tcp_x, tcp_y, object_z + self.hover_height)

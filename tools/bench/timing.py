@@ -34,7 +34,8 @@ the noise of a ROS run, so hundreds of episodes take a minute:
   while the tcp is within ``--hidden-radius`` of it (the hand hides it: the tracker's hold); in
   the tcp frame, without delay, once the object is in the hand
   (``Episode.held_as_the_camera_sees``). The default (``simulator``) is the simulator's own
-  /target_pose, exact and at once. The object's yaw travels with its position, exact; its shape
+  /target_pose, exact and at once. The object's yaw travels with its position, exact (the
+  tracker's can be stale: for such models this bench matches ``vision_target:=truth``); its shape
   and the goal (place) reach the node as the simulator node's latched topics do, before the
   first period. Rendering, the detector's segmentation and its tracker are not emulated;
 - **episodes**: with ``episode_start: go_to_start`` the arm is not teleported: the cup is placed,

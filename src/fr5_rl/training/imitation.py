@@ -210,7 +210,7 @@ class RolloutWorkers:
         parts = self._pool.starmap(_worker_rollouts, jobs)
         observations = np.concatenate([part[0] for part in parts])
         labels = np.concatenate([part[1] for part in parts])
-        successes = sum(part[2] * length for part, (_, length, *_rest) in zip(parts, jobs))
+        successes = sum(rate * length for (_, _, rate), (_, length, *_) in zip(parts, jobs))
         return observations, labels, successes / max(episodes, 1)
 
     def evaluate(self, env_name: str, learner: ActorSnapshot, episodes: int, seed: int) -> float:
