@@ -227,3 +227,29 @@ def test_the_environment_holds_the_target_while_the_tcp_is_within_the_hidden_rad
             env.close()
     assert moved[0.0] == pytest.approx(0.05, abs=0.005)  # followed the push
     assert moved[10.0] == pytest.approx(0.0, abs=0.005)  # held where it was last seen
+
+
+def test_the_environment_holds_the_yaw_with_the_position_while_the_hand_hides_the_object():
+    """The tracker holds a hidden object's last seen yaw as it holds its position (a box nudged
+    under the hand was carried at the yaw it had before): turned while hidden, the observation's
+    yaw block keeps the last seen one; turned in view, it follows."""
+    from fr5_rl.observation import OBJECT_FEATURE_SIZE
+
+    camera = {**PERTURBED, "target_share": 1.0, "target_latency_s": [0.0, 0.0], "target_rate_hz": 50.0}
+    turned = {}
+    for radius in (0.0, 10.0):  # 10 m: the tcp is always "near"
+        env = FR5Env(task="grasp", config={"object": {"variety": {"enabled": True, "kinds": ["box"]}},
+                                           "observation": {"object_features": True},
+                                           "randomisation": {**camera, "target_hidden_radius": radius}})
+        try:
+            obs, _ = env.reset(seed=2)
+            yaw_block = slice(len(obs) - OBJECT_FEATURE_SIZE, len(obs) - OBJECT_FEATURE_SIZE + 2)
+            start = env.object_position().copy()
+            env.plant.world.place_object(tuple(start), yaw=0.3)
+            for _ in range(5):
+                later, *_ = env.step(np.zeros(7))
+            turned[radius] = float(np.abs(later[yaw_block] - obs[yaw_block]).max())
+        finally:
+            env.close()
+    assert turned[0.0] > 0.2  # followed the turn (sin, cos of k times 0.3 rad and then some)
+    assert turned[10.0] < 0.01, turned  # held at the yaw last seen

@@ -295,3 +295,39 @@ class TestTheExpertsLabelsWhereLearnersStalled:
             assert abs(math.degrees(turn)) < 0.3, math.degrees(turn)
         finally:
             env.close()
+
+    def test_a_hand_still_turning_holds_above_a_box_until_aligned(self, monkeypatch):
+        """The hand came down while it turned and closed across a box's corners, 36 degrees off
+        its faces. Straight above the box, a hand 30 degrees off its faces is told to stay up
+        (and turn); the same hand aligned is told to go down."""
+        env = FR5Env("grasp", config={"object": {"variety": {"enabled": True, "kinds": ["box"]}}})
+        try:
+            env.reset(seed=5)
+            state = env.task_state()
+            expert = ScriptedExpert(env)
+            x, y, z = state.object_position
+            grasp_z = z + expert._grasp_offset()
+            above_apex = (x, y, grasp_z + expert._top_above_grasp(expert._grasp_offset()) + 0.01)
+
+            def wrist_turned_by(offset):
+                q = np.asarray(expert._inverse_kinematics(above_apex, state.joint_positions), dtype=float)
+                turned = dataclasses.replace(state, joint_positions=tuple(q))
+                wanted = expert._yaw_error(turned) + offset
+                for _ in range(5):  # the wrist turns the tcp's yaw the other way, nearly one for one
+                    q[5] -= wanted
+                    wanted = expert._yaw_error(dataclasses.replace(state, joint_positions=tuple(q))) + offset
+                return q
+
+            for offset, phase_wanted in ((math.radians(30.0), "hover"), (0.0, "descend")):
+                q = wrist_turned_by(offset)
+                tcp = env.kinematics.tcp_pose(q)[0]
+                assert np.allclose(tcp, above_apex, atol=1e-3)
+                phase, action = self.label(env, monkeypatch, joint_positions=tuple(q), tcp_position=tuple(tcp))
+                assert phase == phase_wanted, (math.degrees(offset), phase)
+                stepped = env.kinematics.tcp_pose(q + action[:6] * env.cfg.action.max_joint_step)[0]
+                if phase_wanted == "hover":
+                    assert stepped[2] - tcp[2] > -0.0005  # not down
+                else:
+                    assert stepped[2] - tcp[2] < -0.001
+        finally:
+            env.close()

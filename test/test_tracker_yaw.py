@@ -47,8 +47,9 @@ def test_seen_then_hidden_keeps_the_yaw_and_shape():
 @pytest.mark.parametrize("turn", [0.0, 0.5, -1.2, 2.8])
 def test_in_the_hand_the_object_turns_with_the_tcp(turn):
     """Taken with the tcp at some yaw, the orientation published in the tcp frame composed with
-    the tcp turned by ``turn`` about the table's z gives the object's yaw turned as much."""
-    frames = Frames()
+    the tcp turned by ``turn`` about the table's z gives the object's yaw turned as much (the
+    yaw last seen kept: not squared between the pads, square_width_tolerance 0)."""
+    frames = Frames(square_width_tolerance=0.0)
     seen = frames(box_view(), tcp=tcp_pose((0.1, -0.05, 0.3), 0.0), width=0.08)
     centre, yaw = np.array(seen.position_table), seen.yaw
     grasp_yaw = yaw + math.pi / 2.0 + 0.1  # across the box (a bit off: the offset is the object's, kept)
@@ -75,6 +76,46 @@ def test_in_the_hand_the_object_turns_with_the_tcp(turn):
     released = frames(scene(GRIPPER_OVER_IT), tcp=turned, width=0.08)
     assert released.state is TrackState.HIDDEN and released.orientation_tcp is None
     assert BOX.yaw_error(released.yaw, expected) < 1e-9 and released.shape == seen.shape
+
+
+def take_at(frames, offset, width):
+    """See the box, then close fingers ``width`` (m) open on it with the tcp's x axis ``offset``
+    (rad) from the box's seen yaw; the tracker's object once in the hand, and the seen yaw."""
+    seen = frames(box_view(), tcp=tcp_pose((0.1, -0.05, 0.3), 0.0), width=0.08)
+    grasp = tcp_pose(np.array(seen.position_table) + [0.0, 0.0, 0.01], seen.yaw + offset)
+    frames(box_view(GRIPPER_OVER_IT), tcp=grasp, width=width)  # closing
+    held = frames(box_view(GRIPPER_OVER_IT), tcp=grasp, width=width)
+    assert held.state is TrackState.IN_HAND
+    # The orientation published in the tcp frame says the same yaw as the table-frame one.
+    taken = grasp[:3, :3] @ matrix_from_quaternion((0, 0, 0), held.orientation_tcp)[:3, :3]
+    np.testing.assert_allclose(taken, rotation_z(held.yaw), atol=1e-9)
+    return held, seen
+
+
+@pytest.mark.parametrize("offset", [0.1, -0.3, 0.6, math.pi / 2.0 + 0.2])
+def test_a_box_squared_between_the_pads_takes_their_yaw(offset):
+    """Fingers stopped at one of the box's sides have squared it between their pads: nudged while
+    hidden, it was carried at the yaw last seen, 17 degrees off (the rehearsal). In the hand its
+    yaw is the pads', of the four the nearest to the one last seen."""
+    frames = Frames(square_width_tolerance=0.008)
+    held, seen = take_at(frames, offset, seen_width(frames))
+    pads = seen.yaw + offset  # the tcp's x; a face on each pad: the box's axes along the tcp's
+    assert ObjectShape("box", (0.04, 0.04, 0.04)).yaw_error(held.yaw, pads) < 1e-9  # modulo a quarter
+    assert abs(math.remainder(held.yaw - seen.yaw, 2.0 * math.pi)) <= math.pi / 4.0 + 1e-9
+
+
+def seen_width(frames):
+    """The box's shorter side as the tracker will have seen it (m)."""
+    return Frames(square_width_tolerance=0.0)(box_view()).shape.size[1]
+
+
+@pytest.mark.parametrize("width_off_its_side", [0.005, 0.009])
+def test_fingers_at_none_of_its_sides_keep_the_yaw_last_seen(width_off_its_side):
+    """Wider than its sides by more than square_width_tolerance (across its corners): nothing
+    says the pads squared it."""
+    frames = Frames(square_width_tolerance=0.004)
+    held, seen = take_at(frames, 0.3, seen_width(frames) + width_off_its_side)
+    assert held.yaw == pytest.approx(seen.yaw, abs=1e-9)
 
 
 def test_seen_and_hidden_poses_carry_the_yaw_in_the_optical_frame():

@@ -266,10 +266,8 @@ class ChainEmulation:
         with its capture time, in the base frame as the node's tf gives it)."""
         now = self.clock.now
         pose = self.sim.object_pose()
-        # The true yaw: what vision_target:=truth gives the node. The tracker's can be stale (an
-        # object nudged while hidden keeps its last seen yaw), so with a model that observes the
-        # yaw this bench stands in for the truth chain (grasp_objects 18/20 here and through ROS
-        # on seeds 1660000+), not the detector's (14/20 through ROS).
+        # The yaw travels with the position through the camera's timing (held while hidden, as
+        # the tracker holds it; in the hand the truth, as the tracker's pads squaring a box give it).
         yaw = yaw_of(pose.quaternion)
         if camera is None:
             return Reading((*pose.position, yaw), now, stamp=now)

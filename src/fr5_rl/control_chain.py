@@ -41,6 +41,8 @@ class Sensed(NamedTuple):
     :param tcp_position: m, base_link. :param tcp_approach_axis: unit vector, base_link.
     :param object_position: m, base_link, as the camera's timing delivers it.
     :param tcp_jacobian: the chain's FK of the noisy joints with its Jacobian, or None.
+    :param object_yaw: rad, base_link, as the camera's timing delivers it (held with the position
+        while the hand hides the object, as the detector's tracker holds it).
     """
 
     joint_positions: Sequence[float]
@@ -50,6 +52,7 @@ class Sensed(NamedTuple):
     tcp_approach_axis: Sequence[float]
     object_position: Sequence[float]
     tcp_jacobian: Any
+    object_yaw: float
 
 
 # What ControlChain.save_state leaves out: built once, never changed by a period.
@@ -283,7 +286,7 @@ class ControlChain:
     # ------------------------------------------------------------------ the way back
     def sense(self, measured: Measurement, tcp_axis: Optional[Sequence[float]], object_position: Sequence[float],
               tcp_to_object_distance: float, held: bool, sample_time: float, now: float,
-              rng: np.random.Generator) -> Sensed:
+              rng: np.random.Generator, object_yaw: float = 0.0) -> Sensed:
         """What the policy is given: the arm as ``measured`` (at ``sample_time``, s since the
         start), the object as the camera's timing shows it at ``now``.
 
@@ -293,6 +296,7 @@ class ControlChain:
         :param tcp_to_object_distance: m, now (the hand hides the object within a radius).
         :param held: the object is in the hand as the detector's tracker decides it (read only
             when :attr:`sees_through_camera`).
+        :param object_yaw: the object's true yaw now (rad, base_link).
         """
         q, velocities, width, tcp_position, tcp_quaternion = measured
         if tcp_axis is None:
@@ -301,8 +305,11 @@ class ControlChain:
         if self._bridge is not None:
             width = self._bridge.observe(width, sample_time)
         if self._target is not None:
-            object_position = self._target.observe(object_position, now, held,
-                                                   tcp_to_object_distance <= self._hidden_radius)
+            # The yaw travels with the position: a frame captured while the hand hides the object
+            # shows the yaw last seen too (an object nudged then is carried at it, unless the pads
+            # square it: the tracker's take into the hand, modelled by in-hand seeing the truth).
+            *object_position, object_yaw = self._target.observe((*object_position, object_yaw), now, held,
+                                                                tcp_to_object_distance <= self._hidden_radius)
         tcp_jacobian = None
         if self._noise_std > 0.0:
             q = (np.asarray(q) + rng.normal(0.0, self._noise_std, 6)).tolist()
@@ -317,7 +324,8 @@ class ControlChain:
         if self._velocities_from_positions:
             velocities = self._estimate_velocities(q, sample_time)
         # tuple.__new__: the named tuple without its Python-level constructor (the step path).
-        return _new_tuple(Sensed, (q, velocities, width, tcp_position, tcp_axis, object_position, tcp_jacobian))
+        return _new_tuple(Sensed, (q, velocities, width, tcp_position, tcp_axis, object_position, tcp_jacobian,
+                                   object_yaw))
 
     def _estimate_velocities(self, positions: Sequence[float], sample_time: float) -> List[float]:
         """Velocities from this sample and the last, as the policy node estimates them behind a

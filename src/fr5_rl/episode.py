@@ -144,10 +144,11 @@ class Episode:
         chain = self.chain
         reading, age, tcp_axis = (early[0], early[1], None) if early is not None else (measured, 0.0, state.tcp_approach_axis)
         held = chain.sees_through_camera and self.held_as_the_camera_sees(state)
-        sensed = chain.sense(reading, tcp_axis, state.object_position, state.tcp_to_object_distance, held,
-                             now - age, now, rng)
         builder = self.observation_builder
         object_yaw = yaw_of(state.object_quaternion) if builder.object_features or builder.include_goal else 0.0
+        sensed = chain.sense(reading, tcp_axis, state.object_position, state.tcp_to_object_distance, held,
+                             now - age, now, rng, object_yaw)
+        object_yaw = sensed.object_yaw
         shape = (object_features(self.plant.object_shape, object_yaw, yaw_of(reading.tcp_quaternion))
                  if builder.object_features else ())
         goal = (goal_features(self.plant.object_shape, sensed.object_position, object_yaw, self.draws.goal)

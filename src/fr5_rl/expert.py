@@ -7,7 +7,7 @@ tests (a task that the expert cannot solve is a broken task), and for demonstrat
 from __future__ import annotations
 
 import math
-from typing import List, Optional, Sequence
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -102,6 +102,10 @@ class ScriptedExpert:
             # the error, not a step from "hover up there" to "descend": a learner averaged the two
             # at the step and sank beside the object.
             top_above = self._top_above_grasp(grasp_offset)
+            # A hand still turning to the object's yaw counts as off to the side by as much as the
+            # turn moves a pad across the top (half its diagonal per radian): it came down while
+            # turning and closed on a box's corners, 36 degrees off its faces.
+            horizontal_error += self._corner_reach() * abs(self._yaw_error(state))
             cone_height = grasp_z + top_above * min(1.0, horizontal_error / self.align_tolerance) \
                 + max(horizontal_error - self.align_tolerance, 0.0) / self.funnel_slope
             target = (object_x, object_y, min(cone_height, object_z + self.hover_height))
@@ -147,6 +151,29 @@ class ScriptedExpert:
         closed hand lets go was told to open and to close in turn, and hovered half open."""
         opening = self.env.episode.gripper_command_width >= 0.25 * self.env.robot_spec.max_opening_width
         return opening and above_rest <= 2.0 * self.release_height and to_goal <= self.keep_releasing_within
+
+    def _corner_reach(self) -> float:
+        """m from the object's axis to its top's corners (0 without an object shape)."""
+        shape = self.env.episode.plant.object_shape
+        return 0.5 * math.hypot(shape.size[0], shape.size[1]) if shape is not None else 0.0
+
+    def _grasp_yaws(self, state) -> Tuple[float, float]:
+        """The hand's yaw now and the one to grasp the object at (rad, base_link): of the yaws the
+        top's symmetry makes equal, the nearest to the hand's own (the hand's own for a cylinder)."""
+        current = self.env.kinematics.tcp_pose(state.joint_positions)[1]
+        tcp_yaw = math.atan2(current[1, 0], current[0, 0])
+        shape = self.env.episode.plant.object_shape
+        order = shape.symmetry_order if shape is not None else 0
+        if order == 0:
+            return tcp_yaw, tcp_yaw
+        period = 2.0 * math.pi / order
+        object_yaw = yaw_of(state.object_quaternion)
+        return tcp_yaw, object_yaw + period * round((tcp_yaw - object_yaw) / period)
+
+    def _yaw_error(self, state) -> float:
+        """rad the hand has still to turn to grasp the object (0 for a cylinder)."""
+        tcp_yaw, wanted = self._grasp_yaws(state)
+        return math.remainder(wanted - tcp_yaw, 2.0 * math.pi)
 
     def _top_above_grasp(self, grasp_offset: float) -> float:
         """m the tcp is above the grasp point when the pads' tips reach the object's top (0
@@ -229,7 +256,7 @@ class ScriptedExpert:
             # observation's (sin kΔ, cos kΔ) tells apart. Nearest to home's, the label asked a
             # hand that had turned the other way to turn a quarter back over a square it was
             # already aligned with, and the learner froze.
-            wanted = object_yaw + period * round((tcp_yaw - object_yaw) / period)
+            wanted = self._grasp_yaws(state)[1]
         else:  # letting go and rising clear: keep the hand's yaw
             wanted = tcp_yaw
         # At most max_turn_step a step: a large turn scaled the whole joint step down (the wrist's

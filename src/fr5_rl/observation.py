@@ -356,7 +356,8 @@ class ObservationBuilder:
 
 
 class DelayedTarget:
-    """The object's position as a camera and the detector deliver it (``randomisation.target_share``).
+    """The object's position (and yaw, appended to it) as a camera and the detector deliver it
+    (``randomisation.target_share``).
 
     Frames are captured every ``frame_period`` from ``phase`` on; each reaches the policy
     ``latency`` after its capture and stands until the next one arrives. Before the first frame
@@ -381,7 +382,8 @@ class DelayedTarget:
     def observe(self, position: Sequence[float], now: float, in_hand: bool, hidden: bool = False) -> Sequence[float]:
         """The position the policy sees at ``now`` (s since the episode's start).
 
-        :param position: the object's true position now (m, base_link).
+        :param position: the object's true position now (m, base_link), and its yaw (rad) after
+            it where the observation has one: held with it.
         :param in_hand: the object is held by the fingers (seen without delay).
         :param hidden: the hand hides the object from the camera now (a frame captured now
             shows where it was last seen).

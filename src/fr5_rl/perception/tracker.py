@@ -9,6 +9,7 @@ The tracker's settings are the ``tracker`` section of ``config/detector.yaml``
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import List, Optional, Sequence, Tuple, Union
@@ -104,6 +105,12 @@ class TrackerSettings:
         Where its top face was shows bare table, the tracker looks for that face up to this far
         away (still hidden by something in front of it) before it drops the track; 0: never.
     :param nudge_step: m between the positions it looks at.
+    :param square_width_tolerance: m; fingers stopped within this of one of a box's measured sides
+        have squared it between the pads (the box turns until a face lies flat on each): in the
+        hand its yaw is then the pads', of the four the nearest to the yaw last seen. A box nudged
+        while the hand hid it was otherwise carried at the yaw it had before (17 degrees off in
+        the rehearsal). Wider (across its corners, or on something else): the last seen yaw is
+        kept. 0: always kept.
     """
 
     hidden_timeout: float
@@ -120,11 +127,13 @@ class TrackerSettings:
     gate_size: float
     nudge_radius: float
     nudge_step: float
+    square_width_tolerance: float
 
     def check(self, source: str) -> None:
         """Refuse values the tracker cannot work with (called by :func:`fr5_rl.config.typed`)."""
         if min(self.hidden_timeout, self.in_hand_timeout, self.front_tolerance, self.grasp_radius,
-               self.grasp_width_margin, self.min_grasp_fraction, self.nudge_radius, self.lift_evidence) < 0 \
+               self.grasp_width_margin, self.min_grasp_fraction, self.nudge_radius, self.lift_evidence,
+               self.square_width_tolerance) < 0 \
                 or self.nudge_step <= 0 or not 0 <= self.max_table_fraction <= 1:
             raise ConfigError(f"{source}: the tracking parameters must be >= 0 and max_table_fraction in [0, 1] "
                               "(hidden_timeout 0 switches tracking off), nudge_step > 0")
@@ -371,7 +380,7 @@ class ObjectTracker:
         if lifted:
             grasped_from = self._grasp_low  # it rose with the fingers from there
         if (not closing or lifted) and tcp is not None and grasped_from is not None:
-            self._take_into_hand(tcp, grasped_from)
+            self._take_into_hand(tcp, grasped_from, gripper_width)
             return self._held(TrackState.IN_HAND)
         gone = self._gone(look)
         if gone is not None and not self._nudged(look):
@@ -401,7 +410,7 @@ class ObjectTracker:
         if self._grasp_pose(tcp, gripper_width, stamp) is None or self._grasp_low is None \
                 or tcp[2, 3] - self._grasp_low[2, 3] < self.settings.lift_evidence:
             return None
-        self._take_into_hand(tcp, self._grasp_low)
+        self._take_into_hand(tcp, self._grasp_low, gripper_width)
         return self._held(TrackState.IN_HAND)
 
     def _follow_hand(self, result: Union[Detection, Refusal], stamp: float, look, tcp: Optional[np.ndarray],
@@ -447,10 +456,14 @@ class ObjectTracker:
             self._grasp_low = None
         return self._grasp_tcp
 
-    def _take_into_hand(self, tcp: np.ndarray, grasped_from: np.ndarray) -> None:
+    def _take_into_hand(self, tcp: np.ndarray, grasped_from: np.ndarray, width: float) -> None:
         """Keep the object's offset in the tcp frame, centred between the fingers, as it was when
-        the tcp stood at ``grasped_from``; place it with the tcp at ``tcp`` now."""
+        the tcp stood at ``grasped_from``; place it with the tcp at ``tcp`` now. A box the fingers,
+        ``width`` (m) open, squared between the pads takes their yaw (:meth:`_yaw_between_pads`)."""
         track = self._track
+        squared = self._yaw_between_pads(grasped_from, width)
+        if squared is not None:
+            track.yaw = squared
         self._grasp_tcp = None
         self._grasp_low = None
         in_tcp = (np.linalg.inv(grasped_from) @ np.append(track.position, 1.0))[:3]
@@ -460,6 +473,27 @@ class ObjectTracker:
         # Upright at its yaw then; from now on it turns with the hand.
         track.rotation_tcp = grasped_from[:3, :3].T @ rotation_z(track.yaw)
         self._place((tcp @ np.append(track.in_tcp, 1.0))[:3], tcp)
+
+    def _yaw_between_pads(self, grasped_from: np.ndarray, width: float) -> Optional[float]:
+        """The yaw (rad, table frame) of a box the fingers, ``width`` (m) open at the tcp pose
+        ``grasped_from``, have squared between their pads: a face on each, so one of its axes lies
+        along the closing axis; of the four such yaws, the nearest to the one last seen (a box
+        squared turns by less than 45 degrees; which side is between the pads the width may not
+        tell, the sides measured a few millimetres off). None: not a box, the width none of its
+        sides (``square_width_tolerance``: across its corners, or on something else), or the
+        fingers closing at a slant."""
+        track, tolerance = self._track, self.settings.square_width_tolerance
+        shape = track.shape
+        if tolerance <= 0.0 or shape is None or shape.kind != "box" \
+                or min(abs(width - shape.size[0]), abs(width - shape.size[1])) > tolerance:
+            return None
+        axis = grasped_from[:3, :3] @ np.asarray(self.settings.closing_axis, dtype=np.float64)
+        axis /= np.linalg.norm(axis)
+        if np.hypot(axis[0], axis[1]) < 0.9:  # the pads tilted: the box's faces need not lie on them
+            return None
+        quarter = np.pi / 2.0
+        closing_yaw = float(np.arctan2(axis[1], axis[0]))
+        return math.remainder(closing_yaw + quarter * round((track.yaw - closing_yaw) / quarter), 2.0 * np.pi)
 
     def _place(self, position: np.ndarray, tcp: np.ndarray) -> None:
         """Move the held object to ``position`` (m, table frame), given the tcp pose ``tcp``
