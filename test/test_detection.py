@@ -248,6 +248,31 @@ def test_an_object_in_the_hand_moves_with_the_tcp():
     assert isinstance(dropped, Refusal) and "bare" in dropped.detail
 
 
+def test_frames_without_the_opening_or_the_tcp_keep_the_object_in_the_hand():
+    """A gripper read back at 10 Hz leaves frames with no opening within 0.1 s (and tf may miss a
+    frame): unknown is not let go. Taken for standing on the table, the object was dropped 2 s
+    later while still in the hand, and the policy held until its episode ran out (the grasp
+    rehearsal's timeouts). A frame that shows the fingers open still lets it go."""
+    frames = Frames()
+    seen = frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08)
+    centre, size = np.array(seen.position_table), seen.detection.size
+    grasp = tcp_at(*(centre + [0.0, 0.0, 0.01]))
+    frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=size)  # closing
+    # A frame without the opening between the closing ones keeps the grasp pose.
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=None).state is TrackState.HIDDEN
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=size).state is TrackState.IN_HAND
+    lifted = centre + [0.0, 0.0, 0.06]
+    for _ in range(25):  # 2.5 s of frames with no opening, longer than hidden_timeout
+        up = frames(scene(GRIPPER_OVER_IT), tcp=tcp_at(*lifted), width=None)
+        assert up.state is TrackState.IN_HAND, up
+    np.testing.assert_allclose(up.position_table, centre + [0.0, 0.0, 0.05], atol=1e-9)
+    # Nor does a frame without the tcp: the object stays where the hand last had it.
+    still = frames(scene(GRIPPER_OVER_IT), tcp=None, width=size)
+    assert still.state is TrackState.IN_HAND and still.position_table == up.position_table
+    # The fingers open: let go.
+    assert frames(scene(GRIPPER_OVER_IT), tcp=tcp_at(*lifted), width=0.08).state is TrackState.HIDDEN
+
+
 def test_an_object_lifted_before_the_fingers_show_stopped_is_in_the_hand():
     """A policy lifts as soon as the fingers close: by the frame that shows them stopped, the tcp
     can be 8 cm up and the table bare where the object stood. The fingers came around it in the

@@ -296,7 +296,7 @@ class ObjectTracker:
         self.settings = settings
         self.detector_settings = detector_settings
         self.table = table
-        self._last_width: Optional[float] = None  # the fingers' opening (m) in the last frame; None: unknown
+        self._last_width: Optional[float] = None  # the fingers' opening (m) in the last frame that had one
         self._grasp_tcp: Optional[np.ndarray] = None  # see _grasp_pose
         self._grasp_low: Optional[np.ndarray] = None  # the lowest tcp pose (table z) with the fingers around it
         self._grasp_low_stamp = 0.0  # when it was taken (s)
@@ -333,7 +333,8 @@ class ObjectTracker:
         tcp = None if table_from_tcp is None else np.asarray(table_from_tcp, dtype=np.float64)
         closing = (gripper_width is not None and self._last_width is not None
                    and self._last_width - gripper_width > self.settings.closing_tolerance)
-        self._last_width = gripper_width
+        if gripper_width is not None:
+            self._last_width = gripper_width
         look = (depth, intrinsics, table_from_optical) if depth is not None and intrinsics is not None \
             and table_from_optical is not None else None
         if self._track.state is TrackState.IN_HAND:
@@ -379,7 +380,9 @@ class ObjectTracker:
                   and tcp[2, 3] - self._grasp_low[2, 3] >= s.lift_evidence)
         if lifted:
             grasped_from = self._grasp_low  # it rose with the fingers from there
-        if (not closing or lifted) and tcp is not None and grasped_from is not None:
+        # Stopped on it (a frame without the opening cannot say so), or lifted with it.
+        stopped = gripper_width is not None and not closing
+        if (stopped or lifted) and tcp is not None and grasped_from is not None:
             self._take_into_hand(tcp, grasped_from, gripper_width)
             return self._held(TrackState.IN_HAND)
         gone = self._gone(look)
@@ -422,9 +425,13 @@ class ObjectTracker:
         if isinstance(result, Detection) and self._far(result.position_table):
             self.reset()
             return Refusal(RefusalReason.SEVERAL_OBJECTS, "an object in the hand and one elsewhere")
-        if tcp is None or width is None or not self._fits(width):
+        if width is not None and not self._fits(width):
             # Let go (or closed on nothing): it stands on the table below where the hand left
             # it, as sure as a sighting; if it fell elsewhere, the look at its top face tells.
+            # An unknown opening is not a let-go: a gripper read back at 10 Hz leaves frames
+            # with none within 0.1 s, and the object, taken for standing on the table, was
+            # dropped 2 s later while still in the hand (the rehearsal's grasp timeouts). Nor is
+            # an unknown tcp: the object stays where the hand last had it.
             track.last_seen = stamp
             track.position[2], track.top_height = track.rest
             return self._held(TrackState.HIDDEN)
@@ -446,17 +453,18 @@ class ObjectTracker:
         at once: by the frame that shows them stopped, the tcp can be further than
         ``grasp_radius`` from where the object stood. The pose of the last frame that had the
         fingers around it is kept until they open past, or close below, its width, the object is
-        seen standing, or the track is reset; a frame without the tcp pose keeps it."""
+        seen standing, or the track is reset; a frame without the tcp pose or the opening
+        keeps it."""
         if self._closed_on_it(tcp, width):
             self._grasp_tcp = np.array(tcp, dtype=np.float64)
             if self._grasp_low is None or tcp[2, 3] < self._grasp_low[2, 3]:
                 self._grasp_low, self._grasp_low_stamp = self._grasp_tcp, stamp
-        elif width is None or not self._fits(width):
+        elif width is not None and not self._fits(width):
             self._grasp_tcp = None
             self._grasp_low = None
         return self._grasp_tcp
 
-    def _take_into_hand(self, tcp: np.ndarray, grasped_from: np.ndarray, width: float) -> None:
+    def _take_into_hand(self, tcp: np.ndarray, grasped_from: np.ndarray, width: Optional[float]) -> None:
         """Keep the object's offset in the tcp frame, centred between the fingers, as it was when
         the tcp stood at ``grasped_from``; place it with the tcp at ``tcp`` now. A box the fingers,
         ``width`` (m) open, squared between the pads takes their yaw (:meth:`_yaw_between_pads`)."""
@@ -474,17 +482,17 @@ class ObjectTracker:
         track.rotation_tcp = grasped_from[:3, :3].T @ rotation_z(track.yaw)
         self._place((tcp @ np.append(track.in_tcp, 1.0))[:3], tcp)
 
-    def _yaw_between_pads(self, grasped_from: np.ndarray, width: float) -> Optional[float]:
+    def _yaw_between_pads(self, grasped_from: np.ndarray, width: Optional[float]) -> Optional[float]:
         """The yaw (rad, table frame) of a box the fingers, ``width`` (m) open at the tcp pose
         ``grasped_from``, have squared between their pads: a face on each, so one of its axes lies
         along the closing axis; of the four such yaws, the nearest to the one last seen (a box
         squared turns by less than 45 degrees; which side is between the pads the width may not
-        tell, the sides measured a few millimetres off). None: not a box, the width none of its
-        sides (``square_width_tolerance``: across its corners, or on something else), or the
-        fingers closing at a slant."""
+        tell, the sides measured a few millimetres off). None: not a box, the width unknown or
+        none of its sides (``square_width_tolerance``: across its corners, or on something
+        else), or the fingers closing at a slant."""
         track, tolerance = self._track, self.settings.square_width_tolerance
         shape = track.shape
-        if tolerance <= 0.0 or shape is None or shape.kind != "box" \
+        if tolerance <= 0.0 or shape is None or shape.kind != "box" or width is None \
                 or min(abs(width - shape.size[0]), abs(width - shape.size[1])) > tolerance:
             return None
         axis = grasped_from[:3, :3] @ np.asarray(self.settings.closing_axis, dtype=np.float64)
