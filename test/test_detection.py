@@ -2,6 +2,7 @@
 
 The scene: a camera 1 m above the table looking straight down; boxes are drawn as the depth of
 their top faces (what such a camera sees of them). Settings: config/detector.yaml's."""
+import math
 import dataclasses
 
 import numpy as np
@@ -271,6 +272,26 @@ def test_frames_without_the_opening_or_the_tcp_keep_the_object_in_the_hand():
     assert still.state is TrackState.IN_HAND and still.position_table == up.position_table
     # The fingers open: let go.
     assert frames(scene(GRIPPER_OVER_IT), tcp=tcp_at(*lifted), width=0.08).state is TrackState.HIDDEN
+
+
+def test_a_tall_object_grasped_near_its_top_is_taken_into_the_hand():
+    """A 10 cm object is grasped 2.5 cm below its top, its centre 4.5 cm below the tcp: farther
+    than grasp_radius from the centre, but near the object. Measured from the centre, it was never
+    taken, then dropped as hidden (the rehearsal's timeouts with the tall cylinders)."""
+    tall = (0.1, -0.05, 0.02, 0.02, 0.10)
+    frames = Frames()
+    seen = frames(scene(tall), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08)
+    centre, size = np.array(seen.position_table), seen.detection.size
+    grasp = tcp_at(*(centre + [0.0, 0.0, 0.045]))
+    assert np.linalg.norm(grasp[:3, 3] - centre) > frames.tracker.settings.grasp_radius
+    frames(scene(tall, GRIPPER_OVER_IT), tcp=grasp, width=size)  # closing
+    assert frames(scene(tall, GRIPPER_OVER_IT), tcp=grasp, width=size).state is TrackState.IN_HAND
+    # Beside it by as much, at its centre's height: not near it.
+    frames = Frames()
+    frames(scene(tall), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08)
+    beside = tcp_at(*(centre + [0.045, 0.0, 0.0]))
+    frames(scene(tall, GRIPPER_OVER_IT), tcp=beside, width=size)
+    assert frames(scene(tall, GRIPPER_OVER_IT), tcp=beside, width=size).state is TrackState.HIDDEN
 
 
 def test_an_object_lifted_before_the_fingers_show_stopped_is_in_the_hand():
@@ -627,6 +648,38 @@ def test_detector_takes_a_list_of_joint_state_topics():
     for bad in ([], ["/a", "/a"]):
         with pytest.raises(ConfigError, match="joint_states_topics"):
             typed(DetectorNodeParams, {**values, "joint_states_topics": bad}, "x")
+
+
+def test_near_an_upright_object_is_near_its_axis_from_bottom_to_top():
+    from fr5_rl.objects import distance_to_upright_object
+
+    centre = (0.5, -0.2, 0.05)
+    assert distance_to_upright_object((0.5, -0.2, 0.095), centre, 0.05) == pytest.approx(0.0)  # at its top
+    assert distance_to_upright_object((0.5, -0.2, 0.13), centre, 0.05) == pytest.approx(0.03)
+    assert distance_to_upright_object((0.53, -0.16, 0.02), centre, 0.05) == pytest.approx(0.05)  # beside it
+    assert distance_to_upright_object((0.53, -0.2, 0.14), centre, 0.05) == pytest.approx(math.hypot(0.03, 0.04))
+    assert distance_to_upright_object((0.5, -0.2, 0.095), centre, 0.0) == pytest.approx(0.045)  # to the centre
+
+
+def test_the_environment_takes_a_tall_object_into_the_hand_as_the_tracker_does():
+    """The environment's model of the tracker measures from the object's axis too: a tall object
+    lifted with the tcp 4.5 cm above its centre is in the hand."""
+    import dataclasses as dc
+
+    from fr5_rl.env_config import load_env_config
+    from fr5_rl.tasks import TaskState, held_as_the_camera_sees
+
+    randomisation = load_env_config().randomisation
+    rest_z, lifted = 0.05, 0.08
+    state = TaskState(joint_positions=(0.0,) * 6, joint_velocities=(0.0,) * 6, tcp_position=(0.5, 0.0, lifted + 0.045),
+                      tcp_approach_axis=(0.0, 0.0, -1.0), gripper_width=0.04, tcp_to_object_distance=0.045,
+                      object_position=(0.5, 0.0, lifted), object_up_axis=(0.0, 0.0, 1.0),
+                      object_start_position=(0.5, 0.0, rest_z), robot_table_contact=False, arm_object_contact=False,
+                      fingers_object_contact=2, tcp_in_workspace=True)
+    assert held_as_the_camera_sees(state, 0.04, rest_z, randomisation, object_half_height=0.05)
+    assert not held_as_the_camera_sees(state, 0.04, rest_z, randomisation, object_half_height=0.0)  # from its centre
+    beside = dc.replace(state, tcp_position=(0.545, 0.0, lifted))
+    assert not held_as_the_camera_sees(beside, 0.04, rest_z, randomisation, object_half_height=0.05)
 
 
 def test_the_environments_model_of_in_the_hand_uses_the_trackers_thresholds():

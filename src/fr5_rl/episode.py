@@ -209,8 +209,9 @@ class Episode:
     def held_as_the_camera_sees(self, state: TaskState) -> bool:
         """The object is in the hand as the detector's tracker decides it
         (:func:`fr5_rl.tasks.held_as_the_camera_sees`)."""
-        return held_as_the_camera_sees(state, self.plant.object_shape.grasp_width, self.plant.object_rest_z,
-                                       self.cfg.randomisation)
+        shape = self.plant.object_shape
+        return held_as_the_camera_sees(state, shape.grasp_width, self.plant.object_rest_z, self.cfg.randomisation,
+                                       shape.size[2] / 2.0)
 
     @property
     def gripper_command_width(self) -> float:

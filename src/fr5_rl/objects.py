@@ -97,6 +97,16 @@ def shape_from_extents(kind: str, extents: Sequence[float]) -> Tuple[ObjectShape
     return ObjectShape(kind, tuple(float(e) for e in extents)), 0.0
 
 
+def distance_to_upright_object(point: Sequence[float], centre: Sequence[float], half_height: float) -> float:
+    """m from ``point`` to an upright object's axis, the segment from its bottom to its top (its
+    centre ``centre`` plus or minus ``half_height``; all m, one frame with z up). A tcp that
+    grasps a tall object near its top is near the object, however far above its centre.
+    """
+    horizontal = math.hypot(point[0] - centre[0], point[1] - centre[1])
+    vertical = max(0.0, abs(point[2] - centre[2]) - half_height)
+    return math.hypot(horizontal, vertical)
+
+
 def yaw_of(quaternion: Sequence[float]) -> float:
     """Yaw (rad) of a frame's x axis in the parent's xy plane, from its quaternion (x, y, z, w)."""
     x, y, z, w = quaternion

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Dict, Mapping, NamedTuple, Optional, Sequence,
 import numpy as np
 
 from ..env_config import EnvConfig, RandomisationConfig
+from ..objects import distance_to_upright_object
 from ..transforms import quaternion_z_axis
 
 if TYPE_CHECKING:
@@ -109,18 +110,20 @@ def task_state_from(measured, object_pose, contacts, object_start: Sequence[floa
 
 
 def held_as_the_camera_sees(state: TaskState, object_width: float, object_rest_z: float,
-                            rnd: RandomisationConfig) -> bool:
+                            rnd: RandomisationConfig, object_half_height: float = 0.0) -> bool:
     """The object is in the hand as the detector's tracker decides it (then it is published in
     the tcp frame, without the camera's delay): the fingers closed to about the object's width,
-    the tcp near its centre, the object lifted off its resting height
-    (``randomisation.target_in_hand_*``, the tracker's thresholds).
+    the tcp near it (its axis, from its bottom to its top), the object lifted off its resting
+    height (``randomisation.target_in_hand_*``, the tracker's thresholds).
 
     :param object_width: m across the object where the fingers close on it.
     :param object_rest_z: z (m, base_link) of its centre standing on the table.
+    :param object_half_height: m from its centre to its top (0: near its centre).
     """
     return (state.gripper_width <= object_width + rnd.target_in_hand_width_margin
-            and state.tcp_to_object_distance <= rnd.target_in_hand_radius
-            and state.object_position[2] > object_rest_z + rnd.target_in_hand_lift)
+            and state.object_position[2] > object_rest_z + rnd.target_in_hand_lift
+            and distance_to_upright_object(state.tcp_position, state.object_position, object_half_height)
+            <= rnd.target_in_hand_radius)
 
 
 def approach_angle(tcp_approach_axis: Sequence[float]) -> float:
