@@ -274,6 +274,29 @@ def test_frames_without_the_opening_or_the_tcp_keep_the_object_in_the_hand():
     assert frames(scene(GRIPPER_OVER_IT), tcp=tcp_at(*lifted), width=0.08).state is TrackState.HIDDEN
 
 
+def test_fingers_opened_wider_than_they_held_it_have_let_go():
+    """A big object: fingers 71 mm open on a 69 mm cylinder were still "around it" by its top
+    face's measured width plus grasp_width_margin; the tracker lifted it with the hand that had
+    just set it down, and the policy never finished letting go. Opened release_opening wider
+    than the narrowest they held it at, they have let go; squeezing on, they have not."""
+    frames = Frames(release_opening=0.004)
+    seen = frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08)
+    centre, size = np.array(seen.position_table), seen.detection.size
+    grasp = tcp_at(*(centre + [0.0, 0.0, 0.01]))
+    held_at = size - 0.002
+    frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=held_at)  # closing
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=held_at).state is TrackState.IN_HAND
+    up = tcp_at(*(centre + [0.0, 0.0, 0.05]))
+    assert frames(scene(GRIPPER_OVER_IT), tcp=up, width=held_at - 0.001).state is TrackState.IN_HAND  # squeezing
+    # Set down, the fingers open 5 mm: still within its measured width plus the margin...
+    opened = held_at - 0.001 + 0.005
+    assert opened <= size + frames.tracker.settings.grasp_width_margin
+    # ...but wider than they held it: let go, standing where the hand set it down.
+    released = frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=opened)
+    assert released.state is TrackState.HIDDEN, released
+    assert released.position_table[2] == pytest.approx(seen.position_table[2])
+
+
 def test_a_tall_object_grasped_near_its_top_is_taken_into_the_hand():
     """A 10 cm object is grasped 2.5 cm below its top, its centre 4.5 cm below the tcp: farther
     than grasp_radius from the centre, but near the object. Measured from the centre, it was never

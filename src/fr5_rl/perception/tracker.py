@@ -112,6 +112,11 @@ class TrackerSettings:
         while the hand hid it was otherwise carried at the yaw it had before (17 degrees off in
         the rehearsal). Wider (across its corners, or on something else): the last seen yaw is
         kept. 0: always kept.
+    :param release_opening: m; fingers opened this much wider than the narrowest they held the
+        object at have let go of it. Measured against the object's top-face width alone, fingers
+        71 mm open on a 69 mm cylinder (measured 61 mm wide, plus grasp_width_margin) still held
+        it: the tracker lifted it with the hand that had just set it down, and the policy, seeing
+        it still in the hand, never finished letting go.
     """
 
     hidden_timeout: float
@@ -129,12 +134,13 @@ class TrackerSettings:
     nudge_radius: float
     nudge_step: float
     square_width_tolerance: float
+    release_opening: float
 
     def check(self, source: str) -> None:
         """Refuse values the tracker cannot work with (called by :func:`fr5_rl.config.typed`)."""
         if min(self.hidden_timeout, self.in_hand_timeout, self.front_tolerance, self.grasp_radius,
                self.grasp_width_margin, self.min_grasp_fraction, self.nudge_radius, self.lift_evidence,
-               self.square_width_tolerance) < 0 \
+               self.square_width_tolerance, self.release_opening) < 0 \
                 or self.nudge_step <= 0 or not 0 <= self.max_table_fraction <= 1:
             raise ConfigError(f"{source}: the tracking parameters must be >= 0 and max_table_fraction in [0, 1] "
                               "(hidden_timeout 0 switches tracking off), nudge_step > 0")
@@ -167,6 +173,8 @@ class Track:
     :param yaw: rad, table frame: its own x axis (see :attr:`TrackedObject.yaw`).
     :param shape: its kind and extents when last seen; None: never measured.
     :param rotation_tcp: its orientation (3x3) in the tcp frame, while in the hand.
+    :param held_width: the narrowest opening (m) the fingers held it at, while in the hand; None:
+        none known yet.
     """
 
     state: TrackState
@@ -180,6 +188,7 @@ class Track:
     yaw: float = 0.0
     shape: Optional[ObjectShape] = None
     rotation_tcp: np.ndarray = field(default_factory=lambda: np.eye(3))
+    held_width: Optional[float] = None
 
     @classmethod
     def lost(cls) -> "Track":
@@ -426,7 +435,11 @@ class ObjectTracker:
         if isinstance(result, Detection) and self._far(result.position_table):
             self.reset()
             return Refusal(RefusalReason.SEVERAL_OBJECTS, "an object in the hand and one elsewhere")
-        if width is not None and not self._fits(width):
+        opened = width is not None and track.held_width is not None and width > track.held_width + s.release_opening
+        let_go = width is not None and (opened or not self._fits(width))
+        if width is not None and not let_go:
+            track.held_width = width if track.held_width is None else min(track.held_width, width)
+        if let_go:
             # Let go (or closed on nothing): it stands on the table below where the hand left
             # it, as sure as a sighting; if it fell elsewhere, the look at its top face tells.
             # An unknown opening is not a let-go: a gripper read back at 10 Hz leaves frames
@@ -473,6 +486,7 @@ class ObjectTracker:
         squared = self._yaw_between_pads(grasped_from, width)
         if squared is not None:
             track.yaw = squared
+        track.held_width = width
         self._grasp_tcp = None
         self._grasp_low = None
         in_tcp = (np.linalg.inv(grasped_from) @ np.append(track.position, 1.0))[:3]
