@@ -7,7 +7,7 @@ tests (a task that the expert cannot solve is a broken task), and for demonstrat
 from __future__ import annotations
 
 import math
-from typing import List, Optional, Sequence, Tuple
+from typing import List, Optional, Sequence
 
 import numpy as np
 
@@ -77,6 +77,8 @@ class ScriptedExpert:
         q = state.joint_positions
         tcp_x, tcp_y, tcp_z = state.tcp_position
         object_x, object_y, object_z = state.object_position
+        # The hand's yaw, once a step (forward kinematics), where the object's yaw matters.
+        hand_yaw = self._hand_yaw(state) if self._symmetry_order() else None
         grasp = env.task.name in ("grasp", "place")
         grasp_offset = self._grasp_offset() if grasp else 0.0
         grasp_z = object_z + grasp_offset
@@ -105,7 +107,7 @@ class ScriptedExpert:
             # A hand still turning to the object's yaw counts as off to the side by as much as the
             # turn moves a pad across the top (half its diagonal per radian): it came down while
             # turning and closed on a box's corners, 36 degrees off its faces.
-            horizontal_error += self._corner_reach() * abs(self._yaw_error(state))
+            horizontal_error += self._corner_reach() * abs(self._yaw_error(state, hand_yaw))
             cone_height = grasp_z + top_above * min(1.0, horizontal_error / self.align_tolerance) \
                 + max(horizontal_error - self.align_tolerance, 0.0) / self.funnel_slope
             target = (object_x, object_y, min(cone_height, object_z + self.hover_height))
@@ -126,7 +128,7 @@ class ScriptedExpert:
         if distance > step:
             fraction = step / distance
             target = (tcp_x + offset_x * fraction, tcp_y + offset_y * fraction, tcp_z + offset_z * fraction)
-        joint_targets = self._inverse_kinematics(target, q, self._rotation(state, phase, held))
+        joint_targets = self._inverse_kinematics(target, q, self._rotation(state, phase, held, hand_yaw))
         max_step = self._max_step
         delta = [(wanted - angle) / max_step for wanted, angle in zip(joint_targets, q)]
         # Scale the whole joint step (not per joint) so the motion keeps its direction.
@@ -157,23 +159,33 @@ class ScriptedExpert:
         shape = self.env.episode.plant.object_shape
         return 0.5 * math.hypot(shape.size[0], shape.size[1]) if shape is not None else 0.0
 
-    def _grasp_yaws(self, state) -> Tuple[float, float]:
-        """The hand's yaw now and the one to grasp the object at (rad, base_link): of the yaws the
-        top's symmetry makes equal, the nearest to the hand's own (the hand's own for a cylinder)."""
-        current = self.env.kinematics.tcp_pose(state.joint_positions)[1]
-        tcp_yaw = math.atan2(current[1, 0], current[0, 0])
+    def _symmetry_order(self) -> int:
+        """The object's top's symmetry order (0: a cylinder, or no shape: its yaw does not matter)."""
         shape = self.env.episode.plant.object_shape
-        order = shape.symmetry_order if shape is not None else 0
+        return shape.symmetry_order if shape is not None else 0
+
+    def _hand_yaw(self, state) -> float:
+        """The tcp's yaw now (rad, base_link), from the measured joints."""
+        current = self.env.kinematics.tcp_pose(state.joint_positions)[1]
+        return math.atan2(current[1, 0], current[0, 0])
+
+    def _grasp_yaw(self, state, hand_yaw: float) -> float:
+        """The hand's yaw to grasp the object at (rad, base_link): of the yaws the top's symmetry
+        makes equal, the nearest to the hand's own ``hand_yaw`` (the hand's own for a cylinder)."""
+        order = self._symmetry_order()
         if order == 0:
-            return tcp_yaw, tcp_yaw
+            return hand_yaw
         period = 2.0 * math.pi / order
         object_yaw = yaw_of(state.object_quaternion)
-        return tcp_yaw, object_yaw + period * round((tcp_yaw - object_yaw) / period)
+        return object_yaw + period * round((hand_yaw - object_yaw) / period)
 
-    def _yaw_error(self, state) -> float:
-        """rad the hand has still to turn to grasp the object (0 for a cylinder)."""
-        tcp_yaw, wanted = self._grasp_yaws(state)
-        return math.remainder(wanted - tcp_yaw, 2.0 * math.pi)
+    def _yaw_error(self, state, hand_yaw: Optional[float] = None) -> float:
+        """rad the hand has still to turn to grasp the object (0 for a cylinder); ``hand_yaw``:
+        the tcp's yaw where the caller has it."""
+        if self._symmetry_order() == 0:
+            return 0.0
+        hand_yaw = self._hand_yaw(state) if hand_yaw is None else hand_yaw
+        return math.remainder(self._grasp_yaw(state, hand_yaw) - hand_yaw, 2.0 * math.pi)
 
     def _top_above_grasp(self, grasp_offset: float) -> float:
         """m the tcp is above the grasp point when the pads' tips reach the object's top (0
@@ -232,20 +244,19 @@ class ScriptedExpert:
         joints, _ = self._inverse.solve(start, tcp_target, self._down_rotation if rotation is None else rotation)
         return joints
 
-    def _rotation(self, state, phase: str, held: bool) -> Sequence[float]:
+    def _rotation(self, state, phase: str, held: bool, tcp_yaw: Optional[float]) -> Sequence[float]:
         """The tcp rotation to aim for: pointing down, turned about the vertical so the fingers
         close across a box's narrower side (its own x along the gripper's x), and, carrying it
         in the place task, so that the box stands at the goal's yaw. A cylinder needs no turn:
-        home's yaw."""
-        shape = self.env.episode.plant.object_shape
-        order = shape.symmetry_order if shape is not None else 0
-        if order == 0:
+        home's yaw.
+
+        :param tcp_yaw: the tcp's yaw now (rad; :meth:`_hand_yaw`), None for a cylinder."""
+        order = self._symmetry_order()
+        if order == 0 or tcp_yaw is None:
             return self._down_rotation
         period = 2.0 * math.pi / order
         home_yaw = math.atan2(self._down_rotation[3], self._down_rotation[0])
         object_yaw = yaw_of(state.object_quaternion)
-        current = self.env.kinematics.tcp_pose(state.joint_positions)[1]
-        tcp_yaw = math.atan2(current[1, 0], current[0, 0])
         if held and self.env.task.name == "place" and phase in ("carry", "lower"):
             # The object turns with the hand: turn the hand by the object's yaw error to the goal.
             error = (self.env.task.goal[2] - object_yaw) % period
@@ -256,7 +267,7 @@ class ScriptedExpert:
             # observation's (sin kΔ, cos kΔ) tells apart. Nearest to home's, the label asked a
             # hand that had turned the other way to turn a quarter back over a square it was
             # already aligned with, and the learner froze.
-            wanted = self._grasp_yaws(state)[1]
+            wanted = self._grasp_yaw(state, tcp_yaw)
         else:  # letting go and rising clear: keep the hand's yaw
             wanted = tcp_yaw
         # At most max_turn_step a step: a large turn scaled the whole joint step down (the wrist's
