@@ -529,6 +529,23 @@ def test_a_period_waits_only_for_a_state_no_period_used():
         FreshStateWait(float("nan"))
 
 
+def test_a_period_waits_past_a_state_older_than_the_largest_age():
+    """fresh_state_max_age: a new state that arrived longer ago than it is waited past too (the
+    phase between a 50 Hz driver and the timer left states 12 ms old at every tick, and the place
+    model did 0/20 behind the emulated FAIRINO driver); given no clock, age is not asked."""
+    reader = JointStateReader(ROBOT.joint_names, ROBOT.finger_joint_names)
+    fresh = FreshStateWait(0.015, max_age_s=0.005)
+    state = _arm_reading(reader, [0.0] * 6, stamp=1.00, received=10.000)
+    assert fresh.is_new(state, now=10.004)
+    assert not fresh.is_new(state, now=10.012)  # 12 ms old: wait for the next one
+    assert fresh.is_new(state)  # no clock: new is enough
+    assert FreshStateWait(0.015).is_new(state, now=10.012)  # no largest age: any will do
+    fresh.used(state)
+    assert not fresh.is_new(state, now=10.001)  # used: never new, however young
+    with pytest.raises(ValueError, match=">= 0"):
+        FreshStateWait(0.015, max_age_s=-0.001)
+
+
 # ----------------------------------------------------------------------------- pick and place
 PLACE_CFG = load_env_config({"object": {"variety": {"enabled": True}}, "observation": {"object_features": True}})
 

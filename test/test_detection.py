@@ -109,9 +109,9 @@ class Frames:
         self.tracker = ObjectTracker(dataclasses.replace(TrackerSettings.from_yaml(), **settings), SETTINGS, TABLE)
         self.stamp = 0.0
 
-    def __call__(self, depth, tcp=None, width=None, dt=0.1):
+    def __call__(self, depth, tcp=None, width=None, dt=0.1, commanded=None):
         self.stamp += dt
-        return self.tracker.update(detect(depth), self.stamp, depth, K, TABLE_FROM_OPTICAL, tcp, width)
+        return self.tracker.update(detect(depth), self.stamp, depth, K, TABLE_FROM_OPTICAL, tcp, width, commanded)
 
 
 def test_size_is_measured_from_the_top_face():
@@ -295,6 +295,47 @@ def test_fingers_opened_wider_than_they_held_it_have_let_go():
     released = frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=opened)
     assert released.state is TrackState.HIDDEN, released
     assert released.position_table[2] == pytest.approx(seen.position_table[2])
+
+
+def test_a_grip_that_widens_while_told_to_close_still_holds():
+    """An object caught near a pad's edge turns square between the pads after the lift: the
+    fingers read 58 mm, then 64 mm on a 65 mm cylinder, all the while told to close (0 mm). By the
+    widening alone that was a let-go: the tracker put the object back on the table under the
+    lifted hand, and the policy, seeing it dropped, opened and grasped again until the time ran
+    out (the rehearsal's place timeouts and knock-overs). Told to close, a grip that widens holds;
+    told to open wider than it holds, and opened, it has let go."""
+    frames = Frames(release_opening=0.004)
+    seen = frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08, commanded=0.08)
+    centre, size = np.array(seen.position_table), seen.detection.size
+    grasp = tcp_at(*(centre + [0.0, 0.0, 0.01]))
+    caught_at = size - 0.009  # on a pad's edge: narrower than the object
+    frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=caught_at, commanded=0.0)
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=caught_at,
+                  commanded=0.0).state is TrackState.IN_HAND
+    up = tcp_at(*(centre + [0.0, 0.0, 0.05]))
+    squared = size - 0.001
+    assert squared > caught_at + frames.tracker.settings.release_opening  # widened past the old rule
+    still = frames(scene(GRIPPER_OVER_IT), tcp=up, width=squared, commanded=0.0)
+    assert still.state is TrackState.IN_HAND, still
+    # The command alone (the fingers not yet moved) lets nothing go...
+    assert frames(scene(GRIPPER_OVER_IT), tcp=up, width=squared, commanded=0.08).state is TrackState.IN_HAND
+    # ...the fingers opened by more than closing_tolerance past the grip they held do.
+    opened = squared + frames.tracker.settings.closing_tolerance + 0.001
+    released = frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=opened, commanded=0.08)
+    assert released.state is TrackState.HIDDEN, released
+
+
+def test_without_the_command_a_widened_grip_has_let_go():
+    """The same widening with the command unknown (no ~gripper_command_topic): the old rule."""
+    frames = Frames(release_opening=0.004)
+    seen = frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08)
+    centre, size = np.array(seen.position_table), seen.detection.size
+    grasp = tcp_at(*(centre + [0.0, 0.0, 0.01]))
+    caught_at = size - 0.009
+    frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=caught_at)
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=caught_at).state is TrackState.IN_HAND
+    up = tcp_at(*(centre + [0.0, 0.0, 0.05]))
+    assert frames(scene(GRIPPER_OVER_IT), tcp=up, width=size - 0.001).state is TrackState.HIDDEN
 
 
 def test_a_tall_object_grasped_near_its_top_is_taken_into_the_hand():
@@ -630,6 +671,23 @@ def test_finger_widths_from_one_topic_are_as_before():
     assert list(widths.widths) == _old_widths(messages, spec.finger_joint_names)
     assert widths.at(100.0 + 0.005 * 7 + 0.001) == _old_widths(messages, spec.finger_joint_names)[7][1]
     assert widths.at(200.0) is None
+
+
+def test_commanded_widths_are_the_newest_arrived_by_a_stamp():
+    """A frame's command is the newest that had reached the node by the frame's stamp: a command
+    sent after the capture (the camera's 60-150 ms latency) says nothing about that frame; NaN is
+    skipped."""
+    from fr5_rl.ros.detector_node import CommandedWidths
+
+    commanded = CommandedWidths(3)
+    assert commanded.at(5.0) is None
+    commanded.add(0.08, 1.0)
+    commanded.add(0.0, 2.0)
+    commanded.add(float("nan"), 2.5)
+    assert commanded.at(0.5) is None and commanded.at(1.5) == 0.08 and commanded.at(2.7) == 0.0
+    commanded.add(0.07, 3.0)
+    commanded.add(0.06, 4.0)  # keeps 3: the one of 1.0 is gone
+    assert commanded.at(1.5) is None and commanded.at(3.5) == 0.07
 
 
 def test_finger_widths_merge_the_arm_and_gripper_topics_by_name():

@@ -149,8 +149,8 @@ def test_the_environment_sees_the_object_late_in_camera_episodes():
         seen = []
         observe = target.observe
 
-        def spy(position, now, in_hand, hidden=False):
-            result = observe(position, now, in_hand, hidden)
+        def spy(position, now, in_hand, hidden=False, *hand):
+            result = observe(position, now, in_hand, hidden, *hand)
             seen.append((now, result[0]))
             return result
 
@@ -187,6 +187,47 @@ def test_a_frame_captured_while_the_hand_hides_the_object_shows_where_it_was_las
     slip.observe((1.0, 0.0, 0.0), 0.0, in_hand=False)
     assert slip.observe((1.0, 0.0, 0.3), 0.02, in_hand=True, hidden=True)[2] == 0.3
     assert slip.observe((1.5, 0.0, 0.0), 0.04, in_hand=False, hidden=True)[2] == 0.3
+
+
+def test_a_held_object_is_seen_where_the_tracker_puts_it():
+    """randomisation.target_in_hand_from_grasp: held, the object is fixed in the tcp frame as it
+    was last seen relative to the lowest tcp pose with the fingers around it, centred between the
+    fingers (the tracker's _take_into_hand): a grip that slid is seen where the tracker has it,
+    not where it is; its yaw stays the true one. Without it the truth, as before."""
+    from fr5_rl.observation import DelayedTarget
+
+    down = np.diag([1.0, -1.0, -1.0])  # the tcp pointing down, its y axis (the fingers' closing) along -y
+    for from_grasp in (True, False):
+        target = DelayedTarget(latency=0.0, frame_period=0.02, phase=0.0, hand_from_grasp=from_grasp)
+        standing = (0.5, 0.1, 0.03, 0.7)
+        target.observe(standing, 0.0, in_hand=False)
+        # The hand comes down around it (hidden), 1 cm off along the closing axis, lowest at 5 cm.
+        for k, z in enumerate((0.07, 0.05, 0.06)):
+            target.observe(standing, 0.02 * (k + 1), in_hand=False, hidden=True,
+                           tcp=(np.array([0.5, 0.11, z]), down), around=True)
+        # Lifted, the object slid 5 mm down the pads and turned 0.1 rad.
+        truth = (0.5, 0.11, 0.075, 0.8)
+        seen = target.observe(truth, 0.08, in_hand=True, tcp=(np.array([0.5, 0.11, 0.1]), down), around=True)
+        if from_grasp:
+            # 2 cm below the lowest tcp, centred between the fingers: 2 cm below the tcp now.
+            assert seen == pytest.approx((0.5, 0.11, 0.08, 0.8))
+        else:
+            assert seen == pytest.approx(truth)
+    # The grasp pose is forgotten once the fingers are no longer around the object.
+    target = DelayedTarget(latency=0.0, frame_period=0.02, phase=0.0, hand_from_grasp=True)
+    target.observe(standing, 0.0, in_hand=False)
+    target.observe(standing, 0.02, in_hand=False, tcp=(np.array([0.5, 0.1, 0.02]), down), around=True)
+    target.observe(standing, 0.04, in_hand=False, around=False)
+    seen = target.observe(standing, 0.06, in_hand=True, tcp=(np.array([0.5, 0.1, 0.06]), down), around=True)
+    assert seen[2] == pytest.approx(0.03)  # from the tcp of the take (3 cm above it), not the 2 cm one
+    # Carried and set down, the fingers still around it: it follows the tcp until they open...
+    assert target.observe(standing, 0.08, in_hand=False, hidden=True, tcp=(np.array([0.7, 0.1, 0.06]), down),
+                          around=True)[:3] == pytest.approx((0.7, 0.1, 0.03))
+    # ...then stays where the hand left it, and a second grasp has its own lowest pose.
+    assert target.observe(standing, 0.10, in_hand=False, hidden=True)[:3] == pytest.approx((0.7, 0.1, 0.03))
+    target.observe(standing, 0.12, in_hand=False, hidden=True, tcp=(np.array([0.7, 0.1, 0.055]), down), around=True)
+    again = target.observe(standing, 0.14, in_hand=True, tcp=(np.array([0.7, 0.1, 0.08]), down), around=True)
+    assert again[:3] == pytest.approx((0.7, 0.1, 0.055))
 
 
 def test_the_camera_target_says_when_what_it_returned_was_captured():

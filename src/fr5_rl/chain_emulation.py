@@ -76,7 +76,8 @@ class ChainEmulation:
                  compute_s: float, rng: np.random.Generator, trained_velocity_source: str,
                  hidden_radius: float = CAMERA_HIDDEN_RADIUS_M,
                  compute_samples_s: Optional[Sequence[float]] = None,
-                 state_jitter_s: float = 0.0, fresh_state_wait_s: float = 0.0) -> None:
+                 state_jitter_s: float = 0.0, fresh_state_wait_s: float = 0.0, fresh_state_max_age_s: float = 0.0,
+                 policy_phase_s: Optional[float] = None) -> None:
         self.sim, self.step, self.chain, self.rng = sim, step, chain, rng
         self.robot = sim.robot_spec
         self.physics_dt = params.physics_dt
@@ -92,7 +93,16 @@ class ChainEmulation:
         # Each joint state reaches the node up to this much after it was sampled (a late simulator
         # loop, the transport): near the timer's ticks, some periods then find no new state.
         self.state_jitter_s = state_jitter_s
-        self.fresh_state = FreshStateWait(fresh_state_wait_s)  # as policy_node: wait for a new state
+        self.fresh_state = FreshStateWait(fresh_state_wait_s, fresh_state_max_age_s)  # as policy_node
+        # The phase of the node's ticks after the driver's joint-state publishing, the same in every
+        # episode (a launch's: the rehearsal keeps one for its 20); None: drawn per episode.
+        self.policy_phase_steps: Optional[int] = None
+        if policy_phase_s is not None:
+            steps = 0 if policy_phase_s == 0 else whole_multiple(policy_phase_s, self.physics_dt)
+            if steps is None or steps >= self.per_period:
+                raise ValueError(f"policy phase {policy_phase_s * 1000:g} ms: a whole number of physics steps "
+                                 f"({self.physics_dt * 1000:g} ms) below the control period, please")
+            self.policy_phase_steps = steps
         self.wait_steps = int(fresh_state_wait_s / self.physics_dt + 1e-9)
         self.in_flight: List[tuple] = []  # (physics step it reaches the node, names, positions, velocities, stamp)
         self.repeated_states = self.periods = 0
@@ -113,6 +123,8 @@ class ChainEmulation:
         camera = load_env_config().randomisation  # the measured camera timing (config/sim.yaml)
         self.target_latency_s, self.target_period_s = tuple(camera.target_latency_s), 1.0 / camera.target_rate_hz
         self.hidden_radius = hidden_radius
+        # The held object where the detector's tracker puts it (rigid from the grasp), not its truth.
+        self.closing_axis = load_yaml("detector")["tracker"]["closing_axis"]  # the tracker's own
 
     def _start_bridge(self, params: SimNodeParams) -> None:
         self.emulator = ControllerEmulator(params.controller_emulator, 0, self.clock)  # never started: no socket
@@ -193,10 +205,13 @@ class ChainEmulation:
         self.reader.restart_estimates()  # policy_node.on_reset
         positioning = self.chain.episode_start == "go_to_start"
         publish_phase, policy_phase = int(self.rng.integers(self.per_publish)), int(self.rng.integers(self.per_period))
+        if self.policy_phase_steps is not None:  # the node's ticks this long after the driver's publishing
+            publish_phase, policy_phase = 0, (-self.policy_phase_steps) % self.per_period
         camera, episode_start_s = None, self.clock.now
         if self.chain.target == "camera":
             camera = DelayedTarget(float(self.rng.uniform(*self.target_latency_s)), self.target_period_s,
-                                   float(self.rng.uniform(0.0, self.target_period_s)))
+                                   float(self.rng.uniform(0.0, self.target_period_s)), hand_from_grasp=True,
+                                   closing_axis=self.closing_axis)
         arm_command: Optional[Sequence[float]] = None
         gripper_width = self.robot.max_opening_width
         pending: List[tuple] = []  # (physics step it arrives at, arm targets, gripper width, from the policy)
@@ -215,7 +230,7 @@ class ChainEmulation:
             if (k + policy_phase) % self.per_period == 0:
                 waiting_until = k + self.wait_steps
             reading = self.reader.reading() if waiting_until is not None else None
-            if waiting_until is not None and (self.fresh_state.is_new(reading) or k >= waiting_until):
+            if waiting_until is not None and (self.fresh_state.is_new(reading, self.clock.now) or k >= waiting_until):
                 waiting_until = None
                 self.periods += 1
                 self.repeated_states += not self.fresh_state.is_new(reading)
@@ -267,14 +282,17 @@ class ChainEmulation:
         now = self.clock.now
         pose = self.sim.object_pose()
         # The yaw travels with the position through the camera's timing (held while hidden, as
-        # the tracker holds it; in the hand the truth, as the tracker's pads squaring a box give it).
+        # the tracker holds it; in the hand the true yaw, as the tracker's pads squaring a box give
+        # it, and the position fixed in the tcp frame from the grasp, as the tracker computes it).
         yaw = yaw_of(pose.quaternion)
         if camera is None:
             return Reading((*pose.position, yaw), now, stamp=now)
         state = self.sim.task_state()
         held = self.sim.held_as_the_camera_sees(state)
+        around = held or self.sim.fingers_around_as_the_camera_sees(state)
+        tcp = self.sim.tcp_pose() if around else None
         position = camera.observe((*state.object_position, yaw), since_start_s, held,
-                                  state.tcp_to_object_distance <= self.hidden_radius)
+                                  state.tcp_to_object_distance <= self.hidden_radius, tcp, around)
         return Reading(tuple(position), now, stamp=now - since_start_s + camera.seen_at)
 
     def _pause(self, arm_command: Optional[Sequence[float]]) -> None:

@@ -16,7 +16,7 @@ from typing import Any, Dict, List, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from .config import RobotSpec
+from .config import RobotSpec, load_yaml
 from .control import ACTION_SIZE, JointCommandShaper
 from .draws import EpisodeDraws
 from .env_config import EnvConfig
@@ -27,7 +27,7 @@ from .observation import DelayedTarget, velocity_from_positions
 from .sim.gripper_chain import EmulatedGripperChain
 from .sim.plant import Measurement, Plant
 from .sim.servo import FirstOrderResponse
-from .transforms import quaternion_z_axis
+from .transforms import matrix_from_quaternion, quaternion_z_axis
 
 
 _new_tuple = tuple.__new__
@@ -90,6 +90,10 @@ class ControlChain:
             self._guard = MotionGuard(robot, cfg.deployed.guard, robot.home_joint_positions,
                                       cfg.task(task).start_joint_noise, control_dt)
         self._hidden_radius = rnd.target_hidden_radius or -1.0  # -1: never hidden
+        self._hand_from_grasp = rnd.target_in_hand_from_grasp
+        self._closing_axis: Sequence[float] = (0.0, 1.0, 0.0)
+        if self._hand_from_grasp:  # the tracker's own axis (config/detector.yaml)
+            self._closing_axis = load_yaml("detector")["tracker"]["closing_axis"]
         self._velocities_from_positions = cfg.observation.joint_velocity_source == "positions"
         # ---- per episode (begin)
         self.gripper_command_width = robot.max_opening_width  # what the fingers were last told (m)
@@ -169,7 +173,8 @@ class ControlChain:
             self._bridge.reset(self.robot.max_opening_width, *draws.bridge_phases)
         self._target = None
         if draws.target is not None:
-            self._target = DelayedTarget(draws.target.latency, draws.target.frame_period, draws.target.phase)
+            self._target = DelayedTarget(draws.target.latency, draws.target.frame_period, draws.target.phase,
+                                         self._hand_from_grasp, self._closing_axis)
         self.sees_through_camera = self._target is not None
         self._substeps, self._physics_dt = substeps, physics_dt
         self._guard_on = draws.guard
@@ -286,7 +291,7 @@ class ControlChain:
     # ------------------------------------------------------------------ the way back
     def sense(self, measured: Measurement, tcp_axis: Optional[Sequence[float]], object_position: Sequence[float],
               tcp_to_object_distance: float, held: bool, sample_time: float, now: float,
-              rng: np.random.Generator, object_yaw: float = 0.0) -> Sensed:
+              rng: np.random.Generator, object_yaw: float = 0.0, around: bool = False) -> Sensed:
         """What the policy is given: the arm as ``measured`` (at ``sample_time``, s since the
         start), the object as the camera's timing shows it at ``now``.
 
@@ -297,6 +302,8 @@ class ControlChain:
         :param held: the object is in the hand as the detector's tracker decides it (read only
             when :attr:`sees_through_camera`).
         :param object_yaw: the object's true yaw now (rad, base_link).
+        :param around: the fingers are around the object as the tracker decides it, held or not
+            (read only with ``randomisation.target_in_hand_from_grasp``).
         """
         q, velocities, width, tcp_position, tcp_quaternion = measured
         if tcp_axis is None:
@@ -308,8 +315,13 @@ class ControlChain:
             # The yaw travels with the position: a frame captured while the hand hides the object
             # shows the yaw last seen too (an object nudged then is carried at it, unless the pads
             # square it: the tracker's take into the hand, modelled by in-hand seeing the truth).
+            tcp = None
+            if self._hand_from_grasp and (held or around):
+                tcp = (np.asarray(tcp_position, dtype=np.float64),
+                       matrix_from_quaternion((0.0, 0.0, 0.0), tcp_quaternion)[:3, :3])
             *object_position, object_yaw = self._target.observe((*object_position, object_yaw), now, held,
-                                                                tcp_to_object_distance <= self._hidden_radius)
+                                                                tcp_to_object_distance <= self._hidden_radius,
+                                                                tcp, around)
         tcp_jacobian = None
         if self._noise_std > 0.0:
             q = (np.asarray(q) + rng.normal(0.0, self._noise_std, 6)).tolist()

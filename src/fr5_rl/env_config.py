@@ -288,6 +288,7 @@ class RandomisationConfig:
     target_in_hand_radius: float
     target_in_hand_width_margin: float
     target_in_hand_lift: float
+    target_in_hand_from_grasp: bool  # the held object as the tracker computes it (rigid from the grasp), not its truth
     response_time_constant_s: List[float]  # s per joint, [] none
     placement_focus_share: float  # share of episodes whose object is placed in the focus region instead
     placement_focus_low: List[float]  # (x, y) m, base_link

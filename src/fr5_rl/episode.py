@@ -20,9 +20,11 @@ from .draws import EpisodeDraws, draw_episode, draw_place
 from .env_config import EnvConfig, load_env_config
 from .kinematics import ForwardKinematics
 from .objects import yaw_of
+from .transforms import matrix_from_quaternion
 from .observation import ActionHistory, ObservationBuilder, goal_features, object_features
 from .sim.plant import JointStates, Measurement, Plant, Pose, SceneDescription
-from .tasks import TASKS, EpisodeVerdict, Task, TaskState, held_as_the_camera_sees, task_state_from
+from .tasks import (TASKS, EpisodeVerdict, Task, TaskState, fingers_around_as_the_camera_sees,
+                    held_as_the_camera_sees, task_state_from)
 
 
 class Episode:
@@ -144,10 +146,12 @@ class Episode:
         chain = self.chain
         reading, age, tcp_axis = (early[0], early[1], None) if early is not None else (measured, 0.0, state.tcp_approach_axis)
         held = chain.sees_through_camera and self.held_as_the_camera_sees(state)
+        around = held or (chain.sees_through_camera and self.cfg.randomisation.target_in_hand_from_grasp
+                          and self.fingers_around_as_the_camera_sees(state))
         builder = self.observation_builder
         object_yaw = yaw_of(state.object_quaternion) if builder.object_features or builder.include_goal else 0.0
         sensed = chain.sense(reading, tcp_axis, state.object_position, state.tcp_to_object_distance, held,
-                             now - age, now, rng, object_yaw)
+                             now - age, now, rng, object_yaw, around)
         object_yaw = sensed.object_yaw
         shape = (object_features(self.plant.object_shape, object_yaw, yaw_of(reading.tcp_quaternion))
                  if builder.object_features else ())
@@ -206,6 +210,12 @@ class Episode:
         return task_state_from(self.plant.measure(), self.plant.object_pose(), self.plant.contacts(),
                                self.object_start, self._workspace)
 
+    def fingers_around_as_the_camera_sees(self, state: TaskState) -> bool:
+        """The fingers around the object as the detector's tracker decides it, lifted or not
+        (:func:`fr5_rl.tasks.fingers_around_as_the_camera_sees`)."""
+        shape = self.plant.object_shape
+        return fingers_around_as_the_camera_sees(state, shape.grasp_width, self.cfg.randomisation, shape.size[2] / 2.0)
+
     def held_as_the_camera_sees(self, state: TaskState) -> bool:
         """The object is in the hand as the detector's tracker decides it
         (:func:`fr5_rl.tasks.held_as_the_camera_sees`)."""
@@ -234,6 +244,12 @@ class Episode:
     def joint_states(self) -> JointStates:
         """All eight joints by name, for ``/joint_states``."""
         return self.plant.joint_states()
+
+    def tcp_pose(self) -> Tuple[np.ndarray, np.ndarray]:
+        """The tcp's position (m, base_link) and orientation (3x3 rotation, base_link) now."""
+        measured = self.plant.measure()
+        return (np.asarray(measured.tcp_position, dtype=np.float64),
+                matrix_from_quaternion((0.0, 0.0, 0.0), measured.tcp_quaternion)[:3, :3])
 
     def object_pose(self) -> Pose:
         """The object's pose in base_link (ground truth)."""

@@ -368,18 +368,33 @@ class DelayedTarget:
     target does not follow a push (the tracker's search for a hidden object nudged up to
     ``nudge_radius``, which keeps its track, is not modelled).
 
+    With ``hand_from_grasp`` the held object is not seen at its true position but where the
+    tracker puts it (:meth:`fr5_rl.perception.tracker.ObjectTracker._take_into_hand`): fixed in
+    the tcp frame as it was last seen relative to the lowest tcp pose with the fingers around it,
+    centred along ``closing_axis``. A grip that slid, or an object nudged while hidden, is then
+    seen 5-10 mm off, as through the rehearsal; its yaw stays the true one (the pads square it).
+
     :param latency: s from capture to the policy node.
     :param frame_period: s between two frames (1 / the camera's rate).
     :param phase: s of the first capture after the episode's start (0 … frame_period).
+    :param hand_from_grasp: the held object as the tracker computes it (see above).
+    :param closing_axis: the direction (tcp frame) the fingers close along.
     """
 
-    def __init__(self, latency: float, frame_period: float, phase: float) -> None:
+    def __init__(self, latency: float, frame_period: float, phase: float, hand_from_grasp: bool = False,
+                 closing_axis: Sequence[float] = (0.0, 1.0, 0.0)) -> None:
         self.latency, self.frame_period, self.phase = latency, frame_period, phase
         self.history: deque = deque()  # (time s, position, hidden) of every period, oldest first
         self._last_seen: Optional[Sequence[float]] = None  # the newest position seen, in a frame or in the hand
         self.seen_at = 0.0  # s since the episode's start: when what observe() returned was captured
+        self.hand_from_grasp = hand_from_grasp
+        axis = np.asarray(closing_axis, dtype=np.float64)
+        self._closing_axis = axis / np.linalg.norm(axis)
+        self._grasp_low: Optional[Tuple[np.ndarray, np.ndarray]] = None  # tcp (position, rotation), lowest around it
+        self._in_tcp: Optional[np.ndarray] = None  # the held object's centre in the tcp frame (m)
 
-    def observe(self, position: Sequence[float], now: float, in_hand: bool, hidden: bool = False) -> Sequence[float]:
+    def observe(self, position: Sequence[float], now: float, in_hand: bool, hidden: bool = False,
+                tcp: Optional[Tuple[np.ndarray, np.ndarray]] = None, around: bool = False) -> Sequence[float]:
         """The position the policy sees at ``now`` (s since the episode's start).
 
         :param position: the object's true position now (m, base_link), and its yaw (rad) after
@@ -387,11 +402,24 @@ class DelayedTarget:
         :param in_hand: the object is held by the fingers (seen without delay).
         :param hidden: the hand hides the object from the camera now (a frame captured now
             shows where it was last seen).
+        :param tcp: the tcp's position (m, base_link) and rotation (3x3) now; needed with
+            ``hand_from_grasp`` (None: the true position while held).
+        :param around: the fingers are around the object (closed to a width that holds it, the
+            tcp near it), held or not.
         """
         self.history.append((now, position, hidden))
-        if in_hand:
+        # Once taken, the tracker keeps it in the hand until the fingers open, set down or not.
+        if in_hand or (self._in_tcp is not None and around and tcp is not None):
+            if self.hand_from_grasp and tcp is not None:
+                position = self._as_the_tracker_holds(position, tcp)
             self._last_seen, self.seen_at = position, now
             return position
+        self._in_tcp = None
+        if self.hand_from_grasp:
+            if not around or tcp is None:
+                self._grasp_low = None
+            elif self._grasp_low is None or tcp[0][2] < self._grasp_low[0][2]:
+                self._grasp_low = tcp
         newest_capture = now - self.latency
         if newest_capture < self.phase:
             self.seen_at = self.history[0][0]
@@ -406,3 +434,15 @@ class DelayedTarget:
             return self._last_seen
         self._last_seen = captured
         return captured
+
+    def _as_the_tracker_holds(self, position: Sequence[float], tcp: Tuple[np.ndarray, np.ndarray]) -> Sequence[float]:
+        """The held object's position (and the true yaw after it) as the tracker computes it."""
+        tcp_position, tcp_rotation = tcp
+        if self._in_tcp is None:
+            seen = self._last_seen if self._last_seen is not None else position
+            low_position, low_rotation = self._grasp_low if self._grasp_low is not None else tcp
+            offset = low_rotation.T @ (np.asarray(seen[:3], dtype=np.float64) - low_position)
+            self._in_tcp = offset - float(offset @ self._closing_axis) * self._closing_axis
+            self._grasp_low = None  # taken: a later grasp (after a set-down) has its own lowest pose
+        held_at = tcp_position + tcp_rotation @ self._in_tcp
+        return (float(held_at[0]), float(held_at[1]), float(held_at[2]), *position[3:])

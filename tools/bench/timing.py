@@ -33,7 +33,9 @@ the noise of a ROS run, so hundreds of episodes take a minute:
   measured range) after its capture, stamped with its capture time; held where it was last seen
   while the tcp is within ``--hidden-radius`` of it (the hand hides it: the tracker's hold); in
   the tcp frame, without delay, once the object is in the hand
-  (``Episode.held_as_the_camera_sees``). The default (``simulator``) is the simulator's own
+  (``Episode.held_as_the_camera_sees``), where the tracker puts it: fixed in the tcp frame as it
+  was last seen relative to the lowest tcp pose with the fingers around it, until they open
+  (5-10 mm off the truth once a grip slides; before stop 61 the truth). The default (``simulator``) is the simulator's own
   /target_pose, exact and at once. The object's yaw travels with its position, exact (the
   tracker's can be stale: for such models this bench matches ``vision_target:=truth``); its shape
   and the goal (place) reach the node as the simulator node's latched topics do, before the
@@ -120,6 +122,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--fresh-state-wait-ms", type=float, default=None,
                         help="the node's ~fresh_state_wait in ms (default config/policy_node.yaml's): how long a "
                              "period waits for a joint state no period used; 0: never")
+    parser.add_argument("--fresh-state-max-age-ms", type=float, default=None,
+                        help="the node's ~fresh_state_max_age in ms (default config/policy_node.yaml's): a state "
+                             "older than this is waited past too (within the wait); 0: any age will do")
+    parser.add_argument("--policy-phase-ms", type=float, default=None,
+                        help="the node's ticks this long after the driver's joint-state publishing, in every "
+                             "episode (a multiple of the profile's physics_dt below the control period); "
+                             "default: a phase drawn per episode")
     parser.add_argument("--results", type=Path, default=RESULTS_DIR)
     parser.add_argument("--name", default=None, help="result file stem (default timing_<task>_<profile>)")
     parser.add_argument("--map", type=Path, default=None,
@@ -144,12 +153,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                           guard=guard if chain.episode_start == "go_to_start" else None)
     fresh_state_wait_s = (node.fresh_state_wait if args.fresh_state_wait_ms is None
                           else args.fresh_state_wait_ms / 1000.0)
+    fresh_state_max_age_s = (node.fresh_state_max_age if args.fresh_state_max_age_ms is None
+                             else args.fresh_state_max_age_ms / 1000.0)
     compute_samples = None
     if args.compute_from is not None:
         compute_samples = json.loads(args.compute_from.read_text())["compute_latency_s"]
     emulation = ChainEmulation(sim, step, chain, params, args.compute_ms / 1000.0, np.random.default_rng(args.seed),
                                 trained.observation.joint_velocity_source, args.hidden_radius,
-                                compute_samples, args.state_jitter_ms / 1000.0, fresh_state_wait_s)
+                                compute_samples, args.state_jitter_ms / 1000.0, fresh_state_wait_s,
+                                fresh_state_max_age_s,
+                                None if args.policy_phase_ms is None else args.policy_phase_ms / 1000.0)
     records = [emulation.run_episode(args.seed + index) for index in range(args.episodes)]
     sim.close()
     successes = sum(record["success"] for record in records)
@@ -171,6 +184,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                        "compute_from": None if args.compute_from is None else relative_path(args.compute_from),
                        "hidden_radius_m": args.hidden_radius if chain.target == "camera" else None,
                        "state_jitter_ms": args.state_jitter_ms, "fresh_state_wait_ms": 1000.0 * fresh_state_wait_s,
+                       "fresh_state_max_age_ms": 1000.0 * fresh_state_max_age_s,
+                       "policy_phase_ms": args.policy_phase_ms,
                        "periods": emulation.periods, "repeated_states": emulation.repeated_states,
                        "episodes": len(records),
                        "seed": args.seed, "successes": successes, "success_rate": rate, "success_ci95": [low, high],

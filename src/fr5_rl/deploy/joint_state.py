@@ -66,24 +66,41 @@ class FreshStateWait:
     start. A period that finds no new state waits for one, up to ``wait_s``; the node's periods
     then follow the driver's states, however the two clocks lie.
 
+    A new state is not enough either: the phase between the driver's clock and the timer, drawn
+    at each start, sets how old the newest state is at a tick (0-20 ms at 50 Hz), and behind the
+    emulated FAIRINO driver the place model did 17/20 with states 0 ms old and 0/20 with states
+    12 ms old (docs/experiments.md, stop 61). With ``max_age_s`` a state that arrived longer ago
+    than that is waited past too, so every period starts just after the driver's state, whatever
+    the phase: the node's periods lock onto the driver's.
+
     :param wait_s: the longest a period waits for a new state (s); 0: never.
+    :param max_age_s: a state that arrived longer ago than this (s) is waited past as well, within
+        ``wait_s``; 0: any age will do.
     """
 
-    def __init__(self, wait_s: float) -> None:
+    def __init__(self, wait_s: float, max_age_s: float = 0.0) -> None:
         if not wait_s >= 0.0:
             raise ValueError(f"the wait for a new joint state must be >= 0 s, got {wait_s}")
+        if not max_age_s >= 0.0:
+            raise ValueError(f"the largest age of a fresh joint state must be >= 0 s, got {max_age_s}")
         self.wait_s = float(wait_s)
+        self.max_age_s = float(max_age_s)
         self._used: Optional[Tuple[float, float]] = None
 
     @staticmethod
     def _key(reading: Optional[Reading]) -> Optional[Tuple[float, float]]:
         return None if reading is None or reading.value is None else (reading.received, reading.stamp)
 
-    def is_new(self, reading: Optional[Reading]) -> bool:
-        """Whether ``reading`` is a state no period acted on (an unusable one counts as new: the
-        period holds on it at once, it has nothing to wait for)."""
+    def is_new(self, reading: Optional[Reading], now: Optional[float] = None) -> bool:
+        """Whether ``reading`` is a state no period acted on and, given ``now`` (s, the clock of
+        its ``received``) and a ``max_age_s``, arrived within it (an unusable one counts as new:
+        the period holds on it at once, it has nothing to wait for)."""
         key = self._key(reading)
-        return key is None or key != self._used
+        if key is None:
+            return True
+        if key == self._used:
+            return False
+        return now is None or self.max_age_s <= 0.0 or now - reading.received <= self.max_age_s
 
     def used(self, reading: Optional[Reading]) -> None:
         """A period acted on ``reading``."""

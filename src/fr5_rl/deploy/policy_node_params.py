@@ -39,6 +39,7 @@ class PolicyNodeParams:
     enabled: bool
     sim_time_input_wait: float
     fresh_state_wait: float
+    fresh_state_max_age: float
     startup_grace: float
     start_move_timeout: float
     motion_guard: bool
@@ -55,6 +56,9 @@ class PolicyNodeParams:
         if not 0.0 <= self.fresh_state_wait < 1.0 / self.rate:
             raise ConfigError(f"{source}: 'fresh_state_wait' must be >= 0 s and shorter than a control period "
                               f"({1.0 / self.rate:g} s), got {self.fresh_state_wait}")
+        if not 0.0 <= self.fresh_state_max_age < 1.0 / self.rate:
+            raise ConfigError(f"{source}: 'fresh_state_max_age' must be >= 0 s and shorter than a control period "
+                              f"({1.0 / self.rate:g} s), got {self.fresh_state_max_age}")
         if self.backend not in ("torch", "onnx"):
             raise ConfigError(f"{source}: 'backend' must be torch or onnx, got {self.backend!r}")
         check_positive(source, rate=self.rate, joint_state_timeout=self.joint_state_timeout,

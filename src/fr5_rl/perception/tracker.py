@@ -116,7 +116,11 @@ class TrackerSettings:
         object at have let go of it. Measured against the object's top-face width alone, fingers
         71 mm open on a 69 mm cylinder (measured 61 mm wide, plus grasp_width_margin) still held
         it: the tracker lifted it with the hand that had just set it down, and the policy, seeing
-        it still in the hand, never finished letting go.
+        it still in the hand, never finished letting go. Applies when the fingers' command is
+        unknown; with it (:meth:`ObjectTracker.update`'s ``commanded_width``) only fingers told to
+        open wider than they hold, and opened by more than ``closing_tolerance``, let go: an
+        object caught near a pad's edge widens the grip by 5-6 mm as it turns square between the
+        pads, with the fingers still told to close (the rehearsal's place timeouts, stop 61).
     """
 
     hidden_timeout: float
@@ -173,7 +177,8 @@ class Track:
     :param yaw: rad, table frame: its own x axis (see :attr:`TrackedObject.yaw`).
     :param shape: its kind and extents when last seen; None: never measured.
     :param rotation_tcp: its orientation (3x3) in the tcp frame, while in the hand.
-    :param held_width: the narrowest opening (m) the fingers held it at, while in the hand; None:
+    :param held_width: the opening (m) the fingers hold it at, while in the hand: the narrowest
+        seen, or with the fingers' command known, the newest while they are told to close; None:
         none known yet.
     """
 
@@ -325,8 +330,8 @@ class ObjectTracker:
 
     def update(self, result: Union[Detection, Refusal], stamp: float, depth: Optional[np.ndarray] = None,
                intrinsics: Optional[Intrinsics] = None, table_from_optical: Optional[np.ndarray] = None,
-               table_from_tcp: Optional[np.ndarray] = None, gripper_width: Optional[float] = None
-               ) -> Union[TrackedObject, Refusal]:
+               table_from_tcp: Optional[np.ndarray] = None, gripper_width: Optional[float] = None,
+               commanded_width: Optional[float] = None) -> Union[TrackedObject, Refusal]:
         """The position to publish for one frame, or why to hold.
 
         :param result: the detector's answer for the frame.
@@ -337,6 +342,8 @@ class ObjectTracker:
         :param table_from_tcp: 4x4 pose (m) of the tcp in the table frame at ``stamp``; None
             when unknown (no in-hand tracking).
         :param gripper_width: the fingers' opening (m) at ``stamp``; None when unknown.
+        :param commanded_width: the opening (m) the fingers were last told to go to, by ``stamp``;
+            None when unknown (then a grip that widens by ``release_opening`` counts as let go).
         """
         if isinstance(result, Refusal) and result.reason not in SCENE_REFUSALS:
             return result  # a frame that could not be looked at says nothing about the object
@@ -348,7 +355,7 @@ class ObjectTracker:
         look = (depth, intrinsics, table_from_optical) if depth is not None and intrinsics is not None \
             and table_from_optical is not None else None
         if self._track.state is TrackState.IN_HAND:
-            return self._follow_hand(result, stamp, look, tcp, gripper_width)
+            return self._follow_hand(result, stamp, look, tcp, gripper_width, commanded_width)
         tracking = self._track.state is not TrackState.LOST
         if tracking and isinstance(result, Refusal) and result.candidates:
             result = self._sort_out(result)
@@ -427,7 +434,7 @@ class ObjectTracker:
         return self._held(TrackState.IN_HAND)
 
     def _follow_hand(self, result: Union[Detection, Refusal], stamp: float, look, tcp: Optional[np.ndarray],
-                     width: Optional[float]) -> Union[TrackedObject, Refusal]:
+                     width: Optional[float], commanded: Optional[float]) -> Union[TrackedObject, Refusal]:
         """:meth:`update` while the object is in the hand."""
         s, track = self.settings, self._track
         if tcp is not None:
@@ -435,10 +442,19 @@ class ObjectTracker:
         if isinstance(result, Detection) and self._far(result.position_table):
             self.reset()
             return Refusal(RefusalReason.SEVERAL_OBJECTS, "an object in the hand and one elsewhere")
-        opened = width is not None and track.held_width is not None and width > track.held_width + s.release_opening
+        held = track.held_width
+        if held is None or width is None:
+            opened = False
+        elif commanded is None:
+            opened = width > held + s.release_opening
+        else:
+            # Told to close, a grip may still widen: an object caught off-centre, on a pad's edge,
+            # turns square between the pads (58 -> 64 mm on a 65 mm cylinder, the fingers told 0).
+            opened = commanded > held + s.closing_tolerance and width > held + s.closing_tolerance
         let_go = width is not None and (opened or not self._fits(width))
         if width is not None and not let_go:
-            track.held_width = width if track.held_width is None else min(track.held_width, width)
+            squeezing = commanded is not None and commanded < width
+            track.held_width = width if held is None or squeezing else min(held, width)
         if let_go:
             # Let go (or closed on nothing): it stands on the table below where the hand left
             # it, as sure as a sighting; if it fell elsewhere, the look at its top face tells.

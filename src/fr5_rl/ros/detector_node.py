@@ -18,7 +18,8 @@ for the one thing standing on the table inside the placement region (config/env.
   position :class:`fr5_rl.perception.tracker.ObjectTracker` keeps (the last seen one, for
   ``~tracker/hidden_timeout``; the tcp's pose from tf times the grasp offset while the fingers, from
   ``~joint_states_topics`` merged by joint name (e.g. the arm driver's and the gripper bridge's),
-  are closed on it), stamped with the new image; ``~track_state``
+  are closed on it, until they open: told to open wider than they hold, on
+  ``~gripper_command_topic``, and opened), stamped with the new image; ``~track_state``
   (std_msgs/String) says which: ``seen``, ``hidden``, ``in hand`` or ``holding: <why>``. Hidden,
   the pose keeps the last seen yaw and the shape the last seen one; held, the pose is in the tcp
   frame with the object's orientation in it as it was when the fingers took it (so tf turns it
@@ -51,7 +52,7 @@ import tf2_ros
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from shape_msgs.msg import SolidPrimitive
-from std_msgs.msg import Float64MultiArray, String
+from std_msgs.msg import Float64, Float64MultiArray, String
 
 from ..config import ConfigError, load_robot_spec
 from ..deploy.joint_state import JointStateReader
@@ -86,6 +87,10 @@ class DetectorNodeParams:
         joints (the arm's driver and a gripper driver may publish apart).
     :param hand_check_rate: Hz at which, between frames, the tcp and the fingers alone are checked
         for a lift of the tracked object in the hand (:meth:`ObjectTracker.hand_between_frames`); 0: off.
+    :param gripper_command_topic: std_msgs/Float64 (m) the fingers are told their opening on (the
+        policy node's and the gripper bridge's); "" when none: a held object whose grip widens by
+        ``tracker/release_opening`` then counts as let go, also while the fingers are told to
+        close (an off-centre grip turning square between the pads widens by 5-6 mm).
     """
 
     color_topic: str
@@ -104,6 +109,7 @@ class DetectorNodeParams:
     joint_states_topics: List[str]
     track_state_topic: str
     hand_check_rate: float
+    gripper_command_topic: str
 
     def check(self, source: str) -> None:
         if self.hand_check_rate < 0:
@@ -185,6 +191,35 @@ class FingerWidths:
         return nearest[1] if abs(nearest[0] - stamp) <= 0.1 else None
 
 
+class CommandedWidths:
+    """The openings (m) the fingers were told to go to, by arrival time (std_msgs/Float64 has no
+    stamp: a command counts from when it reached this node).
+
+    :param length: how many commands to keep (about 4 s at 50 Hz).
+    """
+
+    def __init__(self, length: int) -> None:
+        self.commands: Deque[Tuple[float, float]] = deque(maxlen=length)
+        self.lock = threading.Lock()
+
+    def add(self, width: float, received: float) -> None:
+        """Take one command (m) that arrived at ``received`` (s, ROS time); a NaN or infinite one
+        tells nothing and is skipped (the bridge refuses it too)."""
+        if not np.isfinite(width):
+            return
+        with self.lock:
+            self.commands.append((received, float(width)))
+
+    def at(self, stamp: float) -> Optional[float]:
+        """The newest command (m) that had arrived by ``stamp`` (s); None when none had (or the
+        ones kept are all newer: an old frame's command is then unknown)."""
+        with self.lock:
+            for received, width in reversed(self.commands):
+                if received <= stamp:
+                    return width
+        return None
+
+
 class DetectorNode:
     """Synchronised image subscribers, tf2, the tracker, and the target and debug publishers."""
 
@@ -198,6 +233,7 @@ class DetectorNode:
         self.last_track: Optional[TrackState] = None
         # Recent openings by stamp, to read the opening at an image's stamp.
         self.widths = FingerWidths(load_robot_spec().finger_joint_names, 400)
+        self.commanded = CommandedWidths(200)
         self.warned_no_hand = False
         self.started = time.monotonic()
         self.table_from_optical: Optional[np.ndarray] = None  # of the last frame tf could place
@@ -211,6 +247,10 @@ class DetectorNode:
         self.timing_pub = rospy.Publisher("~timing", Float64MultiArray, queue_size=10)
         for topic in params.joint_states_topics:
             rospy.Subscriber(topic, JointState, self.on_joint_state, queue_size=10, tcp_nodelay=True)
+        if params.gripper_command_topic:
+            rospy.Subscriber(params.gripper_command_topic, Float64,
+                             lambda message: self.commanded.add(message.data, rospy.Time.now().to_sec()),
+                             queue_size=10, tcp_nodelay=True)
         # Images are large: rospy's default receive buffer would queue them behind each other.
         # One deep: when the detector falls behind, the newest frame is the one worth detecting.
         subscribers = [message_filters.Subscriber(topic, kind, queue_size=1, buff_size=1 << 24, tcp_nodelay=True)
@@ -335,7 +375,7 @@ class DetectorNode:
             self.warned_no_hand = True
         with self.tracker_lock:
             return self.tracker.update(result, stamp.to_sec(), depth_m, intrinsics, self.table_from_optical, tcp,
-                                       width)
+                                       width, self.commanded.at(stamp.to_sec()))
 
     def detect(self, rgb: np.ndarray, depth_m: np.ndarray, intrinsics, color: Image) -> Union[Detection, Refusal]:
         try:

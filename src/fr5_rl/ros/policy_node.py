@@ -25,7 +25,8 @@ it down at a goal (the place task) also takes ``~target_shape_topic`` (shape_msg
 a BOX's dimensions along the target pose's frame), the yaw from the target pose's orientation,
 and ``~goal_topic`` (geometry_msgs/PoseStamped in any frame tf2 can bring into the base frame:
 x, y and the yaw of the object's x axis at the goal); it holds until both have come. In real
-time a period waits, up to ``~fresh_state_wait``, for a joint state no period acted on
+time a period waits, up to ``~fresh_state_wait``, for a joint state no period acted on (and
+that arrived within ``~fresh_state_max_age``)
 (:class:`~fr5_rl.deploy.joint_state.FreshStateWait`). Parameters: ``config/policy_node.yaml``.
 """
 from __future__ import annotations
@@ -111,7 +112,8 @@ class PolicyNode:
         self.last_input_stamp = -1.0  # sim time: stamp of the joint state the last step used
         self.reset_stamp = -1.0  # sim time: when the last ~reset came (an episode's goal is stamped then)
         # Real time: a period acts on a state no period before acted on (FreshStateWait's why).
-        self.fresh_state = FreshStateWait(0.0 if self.sim_time else params.fresh_state_wait)
+        self.fresh_state = FreshStateWait(0.0 if self.sim_time else params.fresh_state_wait,
+                                          params.fresh_state_max_age)
 
         self.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(10.0))
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
@@ -273,7 +275,7 @@ class PolicyNode:
         start = time.monotonic()
         deadline = start + self.fresh_state.wait_s
         with self.inputs_changed:
-            while not self.fresh_state.is_new(self.reader.reading()) and not rospy.is_shutdown():
+            while not self.fresh_state.is_new(self.reader.reading(), time.monotonic()) and not rospy.is_shutdown():
                 left = deadline - time.monotonic()
                 if left <= 0.0:
                     break  # the driver is late: act on the state there is

@@ -3,7 +3,8 @@ here is imported, and each :class:`Task` subclass registers itself in :data:`TAS
 import importlib
 import pkgutil
 
-from .base import TASKS, EpisodeVerdict, Task, TaskOutcome, TaskState, held_as_the_camera_sees, task_state_from
+from .base import (TASKS, EpisodeVerdict, Task, TaskOutcome, TaskState, fingers_around_as_the_camera_sees,
+                   held_as_the_camera_sees, task_state_from)
 
 for _module in pkgutil.iter_modules(__path__):
     importlib.import_module(f"{__name__}.{_module.name}")
@@ -12,5 +13,6 @@ from .grasp import GraspTask  # noqa: E402  (imported above; named for callers)
 from .place import PlaceTask  # noqa: E402
 from .reach import ReachTask  # noqa: E402
 
-__all__ = ["TASKS", "EpisodeVerdict", "Task", "TaskOutcome", "TaskState", "held_as_the_camera_sees",
+__all__ = ["TASKS", "EpisodeVerdict", "Task", "TaskOutcome", "TaskState", "fingers_around_as_the_camera_sees",
+           "held_as_the_camera_sees",
            "task_state_from", "ReachTask", "GraspTask", "PlaceTask"]

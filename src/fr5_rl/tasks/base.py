@@ -120,8 +120,15 @@ def held_as_the_camera_sees(state: TaskState, object_width: float, object_rest_z
     :param object_rest_z: z (m, base_link) of its centre standing on the table.
     :param object_half_height: m from its centre to its top (0: near its centre).
     """
+    return (state.object_position[2] > object_rest_z + rnd.target_in_hand_lift
+            and fingers_around_as_the_camera_sees(state, object_width, rnd, object_half_height))
+
+
+def fingers_around_as_the_camera_sees(state: TaskState, object_width: float, rnd: RandomisationConfig,
+                                      object_half_height: float = 0.0) -> bool:
+    """The fingers are around the object as the detector's tracker decides it, lifted or not:
+    closed to about its width, the tcp near it (see :func:`held_as_the_camera_sees`)."""
     return (state.gripper_width <= object_width + rnd.target_in_hand_width_margin
-            and state.object_position[2] > object_rest_z + rnd.target_in_hand_lift
             and distance_to_upright_object(state.tcp_position, state.object_position, object_half_height)
             <= rnd.target_in_hand_radius)
 
