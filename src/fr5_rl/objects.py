@@ -16,6 +16,8 @@ import math
 from dataclasses import dataclass
 from typing import Sequence, Tuple
 
+import numpy as np
+
 SHAPES = ("cylinder", "box")
 
 
@@ -105,6 +107,20 @@ def distance_to_upright_object(point: Sequence[float], centre: Sequence[float], 
     horizontal = math.hypot(point[0] - centre[0], point[1] - centre[1])
     vertical = max(0.0, abs(point[2] - centre[2]) - half_height)
     return math.hypot(horizontal, vertical)
+
+
+def held_in_tcp(grasp_position: Sequence[float], grasp_rotation: Sequence[Sequence[float]],
+                object_position: Sequence[float], closing_axis: Sequence[float]) -> np.ndarray:
+    """The centre (m, tcp frame) of an object that stood at ``object_position`` when the tcp took
+    it at ``grasp_position`` with ``grasp_rotation`` (3x3; all one frame), centred between the
+    fingers: closing fingers push it to their middle, so its offset along ``closing_axis`` (tcp
+    frame) is 0. The detector's tracker and the environment's model of it both hold an object so.
+    """
+    offset = np.asarray(grasp_rotation, dtype=np.float64).T @ (
+        np.asarray(object_position[:3], dtype=np.float64) - np.asarray(grasp_position, dtype=np.float64))
+    axis = np.asarray(closing_axis, dtype=np.float64)
+    axis = axis / np.linalg.norm(axis)
+    return offset - float(offset @ axis) * axis
 
 
 def yaw_of(quaternion: Sequence[float]) -> float:

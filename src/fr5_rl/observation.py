@@ -58,7 +58,7 @@ import numpy as np
 from .config import RobotSpec
 from .env_config import JointStepHintConfig, ObservationConfig
 from .kinematics import ForwardKinematics, solve_linear as _solve
-from .objects import ObjectShape
+from .objects import ObjectShape, held_in_tcp
 
 REACH_OBSERVATION_SIZE = 23  # without previous actions
 GRASP_OBSERVATION_SIZE = 24
@@ -388,8 +388,7 @@ class DelayedTarget:
         self._last_seen: Optional[Sequence[float]] = None  # the newest position seen, in a frame or in the hand
         self.seen_at = 0.0  # s since the episode's start: when what observe() returned was captured
         self.hand_from_grasp = hand_from_grasp
-        axis = np.asarray(closing_axis, dtype=np.float64)
-        self._closing_axis = axis / np.linalg.norm(axis)
+        self._closing_axis = tuple(closing_axis)
         self._grasp_low: Optional[Tuple[np.ndarray, np.ndarray]] = None  # tcp (position, rotation), lowest around it
         self._in_tcp: Optional[np.ndarray] = None  # the held object's centre in the tcp frame (m)
 
@@ -441,8 +440,7 @@ class DelayedTarget:
         if self._in_tcp is None:
             seen = self._last_seen if self._last_seen is not None else position
             low_position, low_rotation = self._grasp_low if self._grasp_low is not None else tcp
-            offset = low_rotation.T @ (np.asarray(seen[:3], dtype=np.float64) - low_position)
-            self._in_tcp = offset - float(offset @ self._closing_axis) * self._closing_axis
+            self._in_tcp = held_in_tcp(low_position, low_rotation, seen, self._closing_axis)
             self._grasp_low = None  # taken: a later grasp (after a set-down) has its own lowest pose
         held_at = tcp_position + tcp_rotation @ self._in_tcp
         return (float(held_at[0]), float(held_at[1]), float(held_at[2]), *position[3:])

@@ -17,7 +17,7 @@ from typing import List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from ..config import ConfigError
-from ..objects import ObjectShape, distance_to_upright_object
+from ..objects import ObjectShape, distance_to_upright_object, held_in_tcp
 from ..transforms import quaternion_from_matrix
 from .camera_model import Intrinsics
 from .detector import Detection, DetectorSettings, Refusal, RefusalReason, TableRegion, load_section
@@ -505,10 +505,8 @@ class ObjectTracker:
         track.held_width = width
         self._grasp_tcp = None
         self._grasp_low = None
-        in_tcp = (np.linalg.inv(grasped_from) @ np.append(track.position, 1.0))[:3]
-        axis = np.asarray(self.settings.closing_axis, dtype=np.float64)
-        axis /= np.linalg.norm(axis)
-        track.in_tcp = in_tcp - float(in_tcp @ axis) * axis  # centred between the fingers
+        track.in_tcp = held_in_tcp(grasped_from[:3, 3], grasped_from[:3, :3], track.position,
+                                   self.settings.closing_axis)  # centred between the fingers
         # Upright at its yaw then; from now on it turns with the hand.
         track.rotation_tcp = grasped_from[:3, :3].T @ rotation_z(track.yaw)
         self._place((tcp @ np.append(track.in_tcp, 1.0))[:3], tcp)
