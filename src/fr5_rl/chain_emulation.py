@@ -123,8 +123,6 @@ class ChainEmulation:
         camera = load_env_config().randomisation  # the measured camera timing (config/sim.yaml)
         self.target_latency_s, self.target_period_s = tuple(camera.target_latency_s), 1.0 / camera.target_rate_hz
         self.hidden_radius = hidden_radius
-        # The held object where the detector's tracker puts it (rigid from the grasp), not its truth.
-        self.closing_axis = load_yaml("detector")["tracker"]["closing_axis"]  # the tracker's own
 
     def _start_bridge(self, params: SimNodeParams) -> None:
         self.emulator = ControllerEmulator(params.controller_emulator, 0, self.clock)  # never started: no socket
@@ -210,8 +208,8 @@ class ChainEmulation:
         camera, episode_start_s = None, self.clock.now
         if self.chain.target == "camera":
             camera = DelayedTarget(float(self.rng.uniform(*self.target_latency_s)), self.target_period_s,
-                                   float(self.rng.uniform(0.0, self.target_period_s)), hand_from_grasp=True,
-                                   closing_axis=self.closing_axis)
+                                   float(self.rng.uniform(0.0, self.target_period_s)),
+                                   hand_from_grasp=True)  # held where the tracker puts it, not the truth
         arm_command: Optional[Sequence[float]] = None
         gripper_width = self.robot.max_opening_width
         pending: List[tuple] = []  # (physics step it arrives at, arm targets, gripper width, from the policy)

@@ -16,7 +16,7 @@ from typing import Any, Dict, List, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from .config import RobotSpec, load_yaml
+from .config import RobotSpec
 from .control import ACTION_SIZE, JointCommandShaper
 from .draws import EpisodeDraws
 from .env_config import EnvConfig
@@ -91,9 +91,6 @@ class ControlChain:
                                       cfg.task(task).start_joint_noise, control_dt)
         self._hidden_radius = rnd.target_hidden_radius or -1.0  # -1: never hidden
         self._hand_from_grasp = rnd.target_in_hand_from_grasp
-        self._closing_axis: Sequence[float] = (0.0, 1.0, 0.0)
-        if self._hand_from_grasp:  # the tracker's own axis (config/detector.yaml)
-            self._closing_axis = load_yaml("detector")["tracker"]["closing_axis"]
         self._velocities_from_positions = cfg.observation.joint_velocity_source == "positions"
         # ---- per episode (begin)
         self.gripper_command_width = robot.max_opening_width  # what the fingers were last told (m)
@@ -174,7 +171,7 @@ class ControlChain:
         self._target = None
         if draws.target is not None:
             self._target = DelayedTarget(draws.target.latency, draws.target.frame_period, draws.target.phase,
-                                         self._hand_from_grasp, self._closing_axis)
+                                         self._hand_from_grasp)
         self.sees_through_camera = self._target is not None
         self._substeps, self._physics_dt = substeps, physics_dt
         self._guard_on = draws.guard

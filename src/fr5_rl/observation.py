@@ -48,6 +48,7 @@ gripper pointing down, roll sits at +-pi and Euler angles jump there.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from collections import deque
@@ -55,7 +56,7 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .config import RobotSpec
+from .config import RobotSpec, load_yaml
 from .env_config import JointStepHintConfig, ObservationConfig
 from .kinematics import ForwardKinematics, solve_linear as _solve
 from .objects import ObjectShape, held_in_tcp
@@ -355,6 +356,13 @@ class ObservationBuilder:
         return out
 
 
+@functools.lru_cache(maxsize=1)
+def tracker_closing_axis() -> Tuple[float, ...]:
+    """The detector's tracker's finger closing axis (tcp frame, config/detector.yaml), read once:
+    a camera target is built at every episode's reset."""
+    return tuple(float(v) for v in load_yaml("detector")["tracker"]["closing_axis"])
+
+
 class DelayedTarget:
     """The object's position (and yaw, appended to it) as a camera and the detector deliver it
     (``randomisation.target_share``).
@@ -378,17 +386,20 @@ class DelayedTarget:
     :param frame_period: s between two frames (1 / the camera's rate).
     :param phase: s of the first capture after the episode's start (0 … frame_period).
     :param hand_from_grasp: the held object as the tracker computes it (see above).
-    :param closing_axis: the direction (tcp frame) the fingers close along.
+    :param closing_axis: the direction (tcp frame) the fingers close along; None: the tracker's
+        own (config/detector.yaml ``tracker.closing_axis``).
     """
 
     def __init__(self, latency: float, frame_period: float, phase: float, hand_from_grasp: bool = False,
-                 closing_axis: Sequence[float] = (0.0, 1.0, 0.0)) -> None:
+                 closing_axis: Optional[Sequence[float]] = None) -> None:
         self.latency, self.frame_period, self.phase = latency, frame_period, phase
         self.history: deque = deque()  # (time s, position, hidden) of every period, oldest first
         self._last_seen: Optional[Sequence[float]] = None  # the newest position seen, in a frame or in the hand
         self.seen_at = 0.0  # s since the episode's start: when what observe() returned was captured
         self.hand_from_grasp = hand_from_grasp
-        self._closing_axis = tuple(closing_axis)
+        if hand_from_grasp and closing_axis is None:
+            closing_axis = tracker_closing_axis()
+        self._closing_axis = None if closing_axis is None else tuple(closing_axis)
         self._grasp_low: Optional[Tuple[np.ndarray, np.ndarray]] = None  # tcp (position, rotation), lowest around it
         self._in_tcp: Optional[np.ndarray] = None  # the held object's centre in the tcp frame (m)
 
