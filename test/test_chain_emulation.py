@@ -176,3 +176,46 @@ def test_a_model_that_observes_the_objects_shape_and_the_goal_runs_through_the_b
     assert out.returncode == 0, out.stderr[-2000:]
     result = json.loads((tmp_path / "one.json").read_text())
     assert result["episodes"] == 1 and result["model"].endswith(model) and len(result["records"]) == 1
+
+
+def test_the_emulated_world_holds_the_objects_of_its_model():
+    """The bench emulates the simulator node, which builds the world of the model it runs: a
+    place model's episodes hold its boxes and cylinders, placed as gym's evaluation places them
+    on the same seeds (before stop 62 the bench ran every model on the default cup)."""
+    from fr5_rl.deploy.bundle import deployment_overrides, read_meta
+    from fr5_rl.envs import FR5Env
+
+    meta = read_meta(package_root() / "models" / "place")
+    world = chain_emulation.model_world(meta, chain_emulation.simulator_profile("fairino"))
+    env = FR5Env("place", config=deployment_overrides(meta))
+    try:
+        labels = set()
+        for seed in range(1_700_000, 1_700_008):
+            world.start(seed)
+            _, info = env.reset(seed=seed)
+            assert world.scene().object_description == env.object_description()
+            assert np.asarray(world.object_start[:2]) == pytest.approx(np.asarray(info["object_start"][:2]))
+            labels.add(env.object_description().label)
+        assert len(labels) >= 2, labels  # boxes as well as cylinders
+    finally:
+        world.close()
+        env.close()
+
+
+def test_a_teleported_start_is_accepted_not_latched_as_a_jump():
+    """With ``episode_start: reset`` the simulator node pauses the policy node over the teleport
+    and resumes it once the new state arrived; the bench must do the same, or a start far from
+    where the last episode ended latches the joint-state check and the episode never begins."""
+    run, env = emulation("default")
+    try:
+        assert run.chain.episode_start == "reset"
+        far = (np.asarray(load_robot_spec().home_joint_positions) + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 2.9])).tolist()
+        env.start(930_010, options={"arm_positions": far})
+        run.clock.now += 1.0  # a stamped state: the check compares stamps
+        run._publish_joint_states(0)
+        run._deliver_joint_states(1)
+        assert run.reader.reading().value.positions[5] == pytest.approx(far[5], abs=1e-3)
+        record = run.run_episode(930_011)
+        assert record["steps"] > 0 and run.reader.reading().problem is None
+    finally:
+        env.close()

@@ -49,8 +49,10 @@ def test_an_episode_goes_through_its_phases_and_is_recorded(sim):
     assert runner.phase is Phase.RUNNING and runner.judged
     assert runner.arm_command == pytest.approx(tuple(command))
     record = runner.finish(verdict(), sim_time=1.5, lockstep=True)
+    start = sim.object_start
     assert record == {"episode": 1, "seed": 4000, "success": True, "failure": "", "steps": 7, "sim_time": 1.5,
-                      "late_periods": 0}
+                      "late_periods": 0, "object": "cylinder",
+                      "object_x": round(float(start[0]), 4), "object_y": round(float(start[1]), 4)}
     assert runner.phase is Phase.HOLDING and runner.hold_until == pytest.approx(clock.now + 0.5)
     assert not runner.take_arm_command(command, None)
     runner.place_next()

@@ -57,8 +57,9 @@ ALLOWED = {
     # Record, replay, compare and fit (compare_run.py, fit_driver.py): tools, never deployed.
     "sim_to_real": {"sim_to_real", "shared", "episode", "sim", "tasks"},
     "training": {"training", "deploy", "shared", "envs", "goal_env", "expert", "sim", "tasks"},
-    # The rehearsal's chain in one process: the simulator, the drivers and the deployed node's code.
-    "chain_emulation": {"shared", "episode", "sim", "tasks", "deploy", "drivers"},
+    # The rehearsal's chain in one process: the simulator (its world built as the node builds
+    # it), the drivers and the deployed node's code.
+    "chain_emulation": {"shared", "episode", "episode_runner", "sim", "tasks", "deploy", "drivers"},
     "deploy": {"deploy", "shared"},
     "perception": {"perception", "shared"},
     "drivers": {"drivers", "shared"},

@@ -71,3 +71,20 @@ def test_dims_become_sizes_and_bad_ones_are_refused():
         ObjectShape("sphere", (0.03, 0.03, 0.03))
     with pytest.raises(ValueError, match="positive"):
         ObjectShape("box", (0.03, float("nan"), 0.05))
+
+
+def test_an_object_is_reported_by_its_kind_and_a_summary_counts_each_kind():
+    from fr5_rl.objects import ObjectShape
+    from fr5_rl.training.evaluation import summarise
+
+    assert ObjectShape("cylinder", (0.05, 0.05, 0.1)).label == "cylinder"
+    assert ObjectShape("box", (0.05, 0.049, 0.1)).label == "square box"  # within the 2 mm tolerance
+    assert ObjectShape("box", (0.06, 0.04, 0.1)).label == "rectangular box"
+    records = [{"success": True, "failure": "", "length": 100, "object": "cylinder"},
+               {"success": False, "failure": "timeout", "length": 400, "object": "cylinder"},
+               {"success": False, "failure": "collision", "length": 90, "object": "square box"},
+               {"success": True, "failure": "", "length": 120}]
+    assert summarise(records)["by_object"] == {
+        "cylinder": {"successes": 1, "episodes": 2, "failures": {"timeout": 1}},
+        "square box": {"successes": 0, "episodes": 1, "failures": {"collision": 1}},
+        "unknown": {"successes": 1, "episodes": 1, "failures": {}}}

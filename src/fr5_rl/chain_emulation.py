@@ -9,17 +9,19 @@ from __future__ import annotations
 import argparse
 import sys
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
 from .config import load_yaml, package_root, typed, whole_multiple
+from .deploy.bundle import deployment_overrides
 from .deploy.deployment import Command, DeploymentStep, StepInputs
 from .deploy.joint_state import FreshStateWait, JointStateReader, Reading, velocities_from_positions
 from .drivers.gripper_bridge import GripperBridge, GripperReading
 from .drivers.gripper_bridge_params import GripperBridgeParams
 from .env_config import load_env_config
-from .episode import Episode
+from .episode import Episode, placement_record
+from .episode_runner import simulator_episode
 from .motion_guard import load_guard_settings
 from .objects import yaw_of
 from .observation import DelayedTarget
@@ -32,6 +34,14 @@ from .sim.servo import DriverModel
 # detector's first "hidden" came at 0.075-0.141 m and 99 % of its "seen" frames at >= 0.179 m
 # (docs/experiments.md, "The whole rehearsal: where the knock-overs come from").
 CAMERA_HIDDEN_RADIUS_M = 0.15
+
+
+def model_world(meta: Mapping[str, Any], params: SimNodeParams) -> Episode:
+    """The world the simulator node builds for the model with ``meta`` (its ``meta.json``):
+    the arm and objects the model was trained for, at the profile's physics step. Without the
+    model's settings the world would hold only the default cup, whatever the model handles.
+    """
+    return simulator_episode(meta["task"], None, deployment_overrides(meta), params)
 
 
 def simulator_profile(profile: str) -> SimNodeParams:
@@ -190,13 +200,19 @@ class ChainEmulation:
     def run_episode(self, seed: int) -> Dict[str, Any]:
         """One episode as the real-time simulator runs it; its outcome and length in periods."""
         sim, step = self.sim, self.step
-        if self.chain.episode_start == "go_to_start" and self.previous_end is not None:
-            sim.start(seed, options={"arm_positions": self.previous_end})
-        else:
+        teleported = not (self.chain.episode_start == "go_to_start" and self.previous_end is not None)
+        if teleported:
             sim.start(seed)
-        object_start = sim.object_start
+        else:
+            sim.start(seed, options={"arm_positions": self.previous_end})
         scene = sim.scene()
         self._deliver_joint_states(sys.maxsize)  # the pause between episodes outlasts any delivery delay
+        if teleported:
+            # The simulator node pauses the policy node over a teleport and resumes it (~enable
+            # true) once the new state has reached it: the jump is accepted, not latched.
+            self._publish_joint_states(0)
+            self._deliver_joint_states(sys.maxsize)
+            self.reader.accept_current()
         # A driver's servo loop runs on across episodes, as the simulator node's does.
         self.driver.reset(sim.joint_positions(), restart_cycle=False)
         step.start_episode()
@@ -260,9 +276,7 @@ class ChainEmulation:
                 if verdict_now.ended:
                     self._pause(arm_command)
                     self.previous_end = sim.joint_positions().tolist()
-                    return {"seed": seed, "object_x": round(float(object_start[0]), 4),
-                            "object_y": round(float(object_start[1]), 4),
-                            "success": bool(verdict_now.success), "failure": verdict_now.failure,
+                    return {"seed": seed, **placement_record(sim), "success": bool(verdict_now.success), "failure": verdict_now.failure,
                             "steps": (k - first_command_step) // self.per_period, "start_move_s": round(start_move_s, 3)}
             if k * self.physics_dt > 120.0:
                 raise RuntimeError(f"seed {seed}: no verdict after 120 s of simulated time (start move stuck?)")

@@ -22,6 +22,7 @@ from .config import load_robot_spec
 from .control import ACTION_SIZE, finite_values
 from .env_config import EnvConfig, load_env_config
 from .episode import Episode
+from .objects import ObjectShape
 from .tasks import TASKS, TaskState
 
 _REWARD_KEYS = {name: f"reward_{name}" for name in ("success", "collision", "failure", "progress", "action")}
@@ -150,6 +151,10 @@ class FR5Env(gym.Env):
     def object_position(self) -> np.ndarray:
         """Object centre in the world (= base_link) frame, metres."""
         return np.array(self.plant.object_pose().position)
+
+    def object_description(self) -> ObjectShape:
+        """This episode's object: its kind and size (m)."""
+        return self.episode.scene().object_description
 
     def joint_positions(self) -> np.ndarray:
         """Measured arm joint angles (rad), controller order."""

@@ -284,3 +284,11 @@ class Episode:
     def close(self) -> None:
         """Disconnect from the simulator."""
         self.plant.close()
+
+
+def placement_record(sim: Episode) -> Dict[str, Any]:
+    """Where this episode's object started (``object_x``, ``object_y``: m, base_link) and what
+    it is (``object``: :attr:`fr5_rl.objects.ObjectShape.label`): the fields a success map and
+    a per-kind count read from an episode's record."""
+    x, y = (round(float(value), 4) for value in sim.object_start[:2])
+    return {"object_x": x, "object_y": y, "object": sim.scene().object_description.label}

@@ -25,14 +25,35 @@ from __future__ import annotations
 import enum
 import time
 from collections import deque
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .episode import Episode
+from .config import deep_update
+from .episode import Episode, placement_record
+from .sim.node_params import SimNodeParams
 from .sim.pacing import ArrivalQueue
 from .sim.servo import DriverModel
 from .tasks import EpisodeVerdict
+
+
+def simulator_episode(task: str, robot: Optional[str], model_settings: Mapping[str, Any],
+                      params: SimNodeParams) -> Episode:
+    """The simulator's world for a model: gym's, with the objects and the arm the model was
+    trained for, at the stand-in arm's own physics step (gym's control periods in lockstep).
+    The simulator node and the bench that emulates the chain (``tools/bench/timing.py``) both
+    build theirs here, so both place the same objects on the same seeds.
+
+    :param task: the registered task (``reach``, ``grasp``, ``grasp_objects``, ``place``).
+    :param robot: the arm (``config/robots/``); None: the configuration's.
+    :param model_settings: the model's deployment overrides
+        (:func:`fr5_rl.deploy.bundle.deployment_overrides`); ``{}`` without a model.
+    :param params: the simulator node's parameters (``physics_dt`` s, ``solver_iterations``, ``lockstep``).
+    """
+    if params.lockstep:
+        return Episode.build(task, robot, model_settings)  # the gym world, as `evaluate.py` builds it
+    return Episode.build(task, robot, deep_update(dict(model_settings), {task: {"simulation": {
+        "physics_dt": params.physics_dt, "solver_iterations": params.solver_iterations}}}, strict=False))
 
 
 class Phase(enum.Enum):
@@ -154,13 +175,15 @@ class EpisodeRunner:
 
         :param sim_time: s of simulated time at its end.
         :param lockstep: record the lockstep's late periods (else the real-time loop's lateness).
-        :return: the record (episode, seed, success, failure, steps, sim_time, and the timing).
+        :return: the record (episode, seed, success, failure, steps, sim_time, where the object
+            started and its kind (:func:`placement_record`), and the timing).
         """
         self.episode += 1
         self.results.append(bool(verdict.success))
         record: Dict[str, Any] = {
             "episode": self.episode, "seed": self.seed + self.episode - 1, "success": bool(verdict.success),
-            "failure": verdict.failure or "", "steps": verdict.steps, "sim_time": round(sim_time, 3)}
+            "failure": verdict.failure or "", "steps": verdict.steps, "sim_time": round(sim_time, 3),
+            **placement_record(self.sim)}
         if lockstep:
             record["late_periods"] = self.late_periods
         elif self.loop_lateness:

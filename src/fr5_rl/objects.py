@@ -63,6 +63,13 @@ class ObjectShape:
         return 4 if self.size[0] - self.size[1] <= self.square_tolerance else 2
 
     @property
+    def label(self) -> str:
+        """What a report counts it as: ``cylinder``, ``square box`` or ``rectangular box``."""
+        if self.kind == "cylinder":
+            return "cylinder"
+        return "square box" if self.symmetry_order == 4 else "rectangular box"
+
+    @property
     def grasp_width(self) -> float:
         """m across the object where the fingers close on it: a cylinder's diameter, a box's
         narrower top side."""

@@ -34,29 +34,13 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 from benchlib import REPO, RESULTS_DIR, latency_ms, machine_info, update_summary, write_result
 from fr5_rl.deploy.bundle import read_meta
 from fr5_rl.env_config import load_env_config
-from fr5_rl.envs import FR5Env
 from fr5_rl.ros.policy_node import TIMING_FIELDS
-from fr5_rl.training.evaluation import wilson_interval
+from fr5_rl.training.evaluation import by_object, wilson_interval
 from fr5_rl.training.success_map import write_success_map
 from roslaunch_run import run_launch
 
 # The policy node's ~timing fields this bench summarises (policy_node.TIMING_FIELDS gives their order).
 SUMMARISED = ("inference", "compute_latency", "joint_state_age")
-
-
-def placed(records: List[Dict[str, Any]], task: str) -> List[Dict[str, Any]]:
-    """The records with the object's start position of each seed (the simulator's env places it
-    from the seed alone: no randomisation there)."""
-    env = FR5Env(task)
-    try:
-        out = []
-        for record in records:
-            _, info = env.reset(seed=int(record["seed"]))
-            x, y = (round(float(value), 4) for value in info["object_start"][:2])
-            out.append({**record, "object_x": x, "object_y": y})
-        return out
-    finally:
-        env.close()
 
 
 CHAINS = {
@@ -140,12 +124,13 @@ def main(argv: Optional[List[str]] = None) -> int:
                    "success_rate_95ci": [round(bound, 3) for bound in wilson_interval(run.successes, run.episodes)], "failures": causes,
                    "seeds": [args.seed, args.seed + args.episodes - 1], "wall_s": round(run.wall_s, 1),
                    "timed_out": run.timed_out, "backend": args.backend,
-                   "policy_timing": timing_summary(samples), "records": run.records}
+                   "policy_timing": timing_summary(samples), "by_object": by_object(run.records),
+                   "records": run.records}
             rows.append(row)
             if args.maps and run.records:
                 stem = args.results / f"map_{Path(model).name}_{chain}"
                 title = f"{model} through the {chain} chain, ROS rehearsal ({run.episodes} episodes)"
-                for written in write_success_map(placed(run.records, task), load_env_config(), stem, title):
+                for written in write_success_map(run.records, load_env_config(), stem, title):
                     print(f"wrote {written}")
             compute = row["policy_timing"]["compute_latency"]
             camera = (f", camera {row['policy_timing']['camera_frames_per_s']} frames/s"
@@ -153,6 +138,8 @@ def main(argv: Optional[List[str]] = None) -> int:
             print(f"{model:24s} {chain:15s} {run.successes}/{run.episodes}  95% CI {row['success_rate_95ci']}  "
                   f"failures {causes or '-'}  ({run.wall_s:.0f} s; {args.backend}, compute latency p50/p99 "
                   f"{compute['p50_ms']}/{compute['p99_ms']} ms{camera})", flush=True)
+            for kind, counts in row["by_object"].items():
+                print(f"  {kind}: {counts['successes']}/{counts['episodes']}, failures {counts['failures'] or '-'}")
     args.results.mkdir(parents=True, exist_ok=True)
     path = args.results / "rehearsal.json"
     write_result(path, {"bench": "rehearsal", "machine": machine_info(), "episodes": args.episodes,

@@ -82,14 +82,13 @@ import numpy as np
 
 from benchlib import AT_LEAST, REPO, RESULTS_DIR, relative_path, update_summary, verdict, write_result
 
-from fr5_rl.chain_emulation import CAMERA_HIDDEN_RADIUS_M, Chain, ChainEmulation, simulator_profile
+from fr5_rl.chain_emulation import CAMERA_HIDDEN_RADIUS_M, Chain, ChainEmulation, model_world, simulator_profile
 from fr5_rl.config import load_robot_spec
 from fr5_rl.deploy.deployment import DeploymentStep
 from fr5_rl.deploy.policy_node_params import load_policy_node_params
 from fr5_rl.deploy.policy import load_policy
 from fr5_rl.env_config import load_env_config
-from fr5_rl.episode import Episode
-from fr5_rl.training.evaluation import wilson_interval
+from fr5_rl.training.evaluation import by_object, wilson_interval
 from fr5_rl.training.success_map import write_success_map
 
 TARGET_SUCCESS = 0.9
@@ -141,8 +140,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     params = simulator_profile(args.profile)
     chain = Chain.of(params, args)
     task = policy.task
-    sim = Episode.build(task, overrides={task: {"simulation": {"physics_dt": params.physics_dt,
-                                                               "solver_iterations": params.solver_iterations}}})
+    sim = model_world(policy.meta, params)
     node = load_policy_node_params()
     guard = dataclasses.replace(node.guard, go_to_start=True)  # the bench makes the start moves itself
     trained = load_env_config(policy.meta.get("env_overrides", {}))
@@ -175,6 +173,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     print(f"{relative_path(model_dir)} behind the {args.profile} profile ({chain}): {successes}/{len(records)} "
           f"({100 * rate:.1f} %, 95 % CI {100 * low:.1f}-{100 * high:.1f} %), failures {failures}; "
           f"{emulation.repeated_states} of {emulation.periods} periods acted on a state a period before used")
+    for kind, counts in by_object(records).items():
+        print(f"  {kind}: {counts['successes']}/{counts['episodes']}, failures {counts['failures'] or '-'}")
     verdicts = {"success_rate": verdict(rate, TARGET_SUCCESS, AT_LEAST)}
     name = args.name or f"timing_{task}_{args.profile}"
     out = args.results / f"{name}.json"
@@ -189,7 +189,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                        "periods": emulation.periods, "repeated_states": emulation.repeated_states,
                        "episodes": len(records),
                        "seed": args.seed, "successes": successes, "success_rate": rate, "success_ci95": [low, high],
-                       "failures": failures, "records": records}, verdicts)
+                       "failures": failures, "by_object": by_object(records), "records": records}, verdicts)
     update_summary(args.results, name, out)
     if args.map is not None:
         title = f"{relative_path(model_dir)} behind the {args.profile} chain, emulated ({len(records)} episodes)"

@@ -66,8 +66,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ..config import ConfigError, whole_multiple
 from ..deploy.bundle import ModelFilesError, deployment_overrides, read_meta, resolve_model_dir, task_and_arm
-from ..episode import Episode
-from ..episode_runner import EpisodeRunner
+from ..episode_runner import EpisodeRunner, simulator_episode
 from ..observation import TASK_BLOCKS
 from ..sim.plant import JointStates
 from ..tasks import EpisodeVerdict
@@ -99,16 +98,11 @@ class SimulatorNode:
         # The objects the model was trained to handle (object.variety), as evaluate.py keeps them.
         model_settings = (deployment_overrides(read_meta(resolve_model_dir(params.model, params.caller_dir or None)))
                           if params.model else {})
-        if params.lockstep:
-            if params.servo_rate > 0 or any(params.response_time_constant_s):
-                raise ConfigError("sim_node: lockstep advances whole control periods as gym does; it cannot also "
-                                  "model a servo cycle or response: set ~servo_rate 0 and "
-                                  "~response_time_constant_s [] (driver:=default) or ~lockstep false")
-            self.sim = Episode.build(task, robot, model_settings)  # the gym world, as `evaluate.py` builds it
-        else:
-            # The stand-in arm runs at its own physics step, finer than reach training uses.
-            self.sim = Episode.build(task, robot, {**model_settings, task: {"simulation": {
-                "physics_dt": params.physics_dt, "solver_iterations": params.solver_iterations}}})
+        if params.lockstep and (params.servo_rate > 0 or any(params.response_time_constant_s)):
+            raise ConfigError("sim_node: lockstep advances whole control periods as gym does; it cannot also "
+                              "model a servo cycle or response: set ~servo_rate 0 and "
+                              "~response_time_constant_s [] (driver:=default) or ~lockstep false")
+        self.sim = simulator_episode(task, robot, model_settings, params)
         self.spec = self.sim.robot_spec
         self.physics_dt = self.sim.physics_dt
         # Lockstep publishes once per control period instead.

@@ -46,6 +46,7 @@ def run_episodes(task: str, env_overrides: Dict[str, Any], make_actor, seeds: Li
     for index, seed in enumerate(seeds):
         obs, _ = env.reset(seed=int(seed))
         object_x, object_y = (round(float(value), 5) for value in env.object_position()[:2])
+        object_label = env.object_description().label
         if on_reset:
             on_reset()
         done, steps, total, info = False, 0, 0.0, {}
@@ -59,7 +60,7 @@ def run_episodes(task: str, env_overrides: Dict[str, Any], make_actor, seeds: Li
         records.append({"seed": int(seed), "success": bool(info.get("is_success", False)),
                         "failure": info.get("failure") or "", "length": steps, "return": round(total, 4),
                         "final_distance_m": round(float(np.linalg.norm(env.object_position() - env.tcp_position())), 5),
-                        "object_x": object_x, "object_y": object_y})
+                        "object_x": object_x, "object_y": object_y, "object": object_label})
     env.close()
     if gif_path is not None and frames:
         from PIL import Image
@@ -81,7 +82,21 @@ def summarise(records: List[Dict[str, Any]]) -> Dict[str, Any]:
             "success_rate_95ci": [round(low, 4), round(high, 4)],
             "mean_episode_length": float(np.mean([r["length"] for r in records])) if n else 0.0,
             "collision_rate": failures.get("collision", 0) / n if n else 0.0,
-            "failures": failures}
+            "failures": failures, "by_object": by_object(records)}
+
+
+def by_object(records: List[Dict[str, Any]]) -> Dict[str, Dict[str, Any]]:
+    """Successes, episodes and failure causes per kind of object (records' ``object``:
+    ``cylinder``, ``square box``, ``rectangular box``); records without one count as ``unknown``."""
+    kinds: Dict[str, Dict[str, Any]] = {}
+    for record in records:
+        kind = kinds.setdefault(record.get("object") or "unknown", {"successes": 0, "episodes": 0, "failures": {}})
+        kind["episodes"] += 1
+        if record["success"]:
+            kind["successes"] += 1
+        elif record.get("failure"):
+            kind["failures"][record["failure"]] = kind["failures"].get(record["failure"], 0) + 1
+    return dict(sorted(kinds.items()))
 
 
 def format_count(value: float, _position: Any = None) -> str:
