@@ -186,7 +186,12 @@ def test_the_emulated_world_holds_the_objects_of_its_model():
     from fr5_rl.envs import FR5Env
 
     meta = read_meta(package_root() / "models" / "place")
-    world = chain_emulation.model_world(meta, chain_emulation.simulator_profile("fairino"))
+    params = chain_emulation.simulator_profile("fairino")
+    world = chain_emulation.model_world(meta, params)
+    # The node's solver iterations are a floor: place's contacts keep the task's own, more.
+    trained = load_env_config(deployment_overrides(meta)).simulation_for("place")
+    assert world.cfg.simulation_for("place").solver_iterations == trained.solver_iterations > params.solver_iterations
+    assert world.cfg.simulation_for("place").physics_dt == params.physics_dt
     env = FR5Env("place", config=deployment_overrides(meta))
     try:
         labels = set()

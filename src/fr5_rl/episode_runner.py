@@ -30,6 +30,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from .config import deep_update
+from .env_config import load_env_config
 from .episode import Episode, placement_record
 from .sim.node_params import SimNodeParams
 from .sim.pacing import ArrivalQueue
@@ -48,12 +49,16 @@ def simulator_episode(task: str, robot: Optional[str], model_settings: Mapping[s
     :param robot: the arm (``config/robots/``); None: the configuration's.
     :param model_settings: the model's deployment overrides
         (:func:`fr5_rl.deploy.bundle.deployment_overrides`); ``{}`` without a model.
-    :param params: the simulator node's parameters (``physics_dt`` s, ``solver_iterations``, ``lockstep``).
+    :param params: the simulator node's parameters (``physics_dt`` s, ``solver_iterations`` at
+        least, ``lockstep``).
     """
     if params.lockstep:
         return Episode.build(task, robot, model_settings)  # the gym world, as `evaluate.py` builds it
+    # The node's solver iterations are a floor: a task whose contacts need more keeps its own.
+    trained = load_env_config(model_settings).simulation_for(task).solver_iterations
     return Episode.build(task, robot, deep_update(dict(model_settings), {task: {"simulation": {
-        "physics_dt": params.physics_dt, "solver_iterations": params.solver_iterations}}}, strict=False))
+        "physics_dt": params.physics_dt,
+        "solver_iterations": max(params.solver_iterations, trained)}}}, strict=False))
 
 
 class Phase(enum.Enum):
