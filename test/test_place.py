@@ -372,3 +372,36 @@ class TestTheExpertsLabelsWhereLearnersStalled:
                     assert stepped[2] - tcp[2] < -0.001
         finally:
             env.close()
+
+
+def test_the_expert_sets_a_held_object_down_where_the_policy_sees_it():
+    """With the tracker's hold modelled (``target_in_hand_from_grasp``) the policy sees a held
+    object fixed in the tcp frame from the grasp, not where a slip in the grip took it; the
+    expert's labels place that object, or a learner is told to move one it sees on the goal."""
+    camera = {"object": {"variety": {"enabled": True}}, "observation": {"object_features": True},
+              "randomisation": {"enabled": True, "plain_episode_share": 0.0, "target_share": 1.0,
+                                "target_hidden_radius": 0.15, "target_in_hand_from_grasp": True}}
+    env = FR5Env("place", config=camera)
+    try:
+        expert = ScriptedExpert(env)
+        env.reset(seed=9300)
+        target = env.episode.chain.target
+        assert target is not None and target.held_in_tcp is None and expert._held_as_the_policy_sees() is None
+        for _ in range(300):
+            env.step(expert.act())
+            if target.held_in_tcp is not None and expert.phase == "lower":  # over the goal
+                break
+        assert target.held_in_tcp is not None and expert.phase == "lower", "the expert never carried it to the goal"
+        position, rotation = env.episode.tcp_pose()
+        assert expert._held_as_the_policy_sees() == pytest.approx(tuple(position + rotation @ target.held_in_tcp))
+        label = expert.act()
+        target._in_tcp = target.held_in_tcp + rotation.T @ np.array([0.03, 0.0, 0.0])  # seen 3 cm further along x
+        assert not np.allclose(expert.act(), label, atol=1e-3)
+    finally:
+        env.close()
+    plain = FR5Env("place")
+    try:
+        plain.reset(seed=9300)
+        assert ScriptedExpert(plain)._held_as_the_policy_sees() is None
+    finally:
+        plain.close()

@@ -7,7 +7,7 @@ tests (a task that the expert cannot solve is a broken task), and for demonstrat
 from __future__ import annotations
 
 import math
-from typing import List, Optional, Sequence
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -34,7 +34,7 @@ class ScriptedExpert:
     pad_tips_below_tcp = 0.01  # m (urdf: the pads reach 1 cm beyond the tcp)
     # m of table under the pads' tips where they close. A grip 15 mm above the centre held a
     # 36 mm box by its top 13 mm, and it turned out of the pads as it rose.
-    tip_clearance = 0.008
+    tip_clearance = 0.012
     align_tolerance = 0.01  # m horizontal error at which the pads' tips may reach the object's top
     funnel_slope = 0.5  # m of horizontal error allowed per m of height above that
     at_grasp_tolerance = 0.008  # m from the grasp point under which it closes
@@ -217,6 +217,13 @@ class ScriptedExpert:
         start_z = state.object_start_position[2]
         to_goal = math.hypot(goal_x - object_x, goal_y - object_y)
         tcp_x, tcp_y, tcp_z = state.tcp_position
+        if held:
+            # Set down where the policy sees it: a learner cannot correct a slip it never sees, and
+            # labels from the truth told it to move an object it saw on the goal (it froze there).
+            seen = self._held_as_the_policy_sees()
+            if seen is not None:
+                object_x, object_y, object_z = seen
+                to_goal = math.hypot(goal_x - object_x, goal_y - object_y)
         offset_x, offset_y = tcp_x - object_x, tcp_y - object_y  # the object's place in the hand
         if held:
             hand_over_goal = (goal_x + offset_x, goal_y + offset_y)
@@ -240,6 +247,18 @@ class ScriptedExpert:
                 return "release", (tcp_x, tcp_y, tcp_z)  # the fingers still opening
             return "retreat", (tcp_x, tcp_y, object_z + self.hover_height)
         return None
+
+    def _held_as_the_policy_sees(self) -> Optional[Tuple[float, float, float]]:
+        """The held object's centre (m, base_link) where the policy observes it, when the episode
+        models the tracker's hold (``randomisation.target_in_hand_from_grasp``: fixed in the tcp
+        frame from the grasp); None where the policy sees the truth."""
+        target = self.env.episode.chain.target
+        in_tcp = None if target is None else target.held_in_tcp
+        if in_tcp is None:
+            return None
+        position, rotation = self.env.episode.tcp_pose()
+        held = np.asarray(position) + np.asarray(rotation) @ in_tcp
+        return float(held[0]), float(held[1]), float(held[2])
 
     def _inverse_kinematics(self, tcp_target: Sequence[float], start: Sequence[float],
                             rotation: Optional[Sequence[float]] = None) -> List[float]:

@@ -445,6 +445,12 @@ class DelayedTarget:
         self._last_seen = captured
         return captured
 
+    @property
+    def held_in_tcp(self) -> Optional[np.ndarray]:
+        """The held object's centre in the tcp frame (m) as the tracker fixed it when it took the
+        object, while held with ``hand_from_grasp``; else None."""
+        return self._in_tcp
+
     def _as_the_tracker_holds(self, position: Sequence[float], tcp: Tuple[np.ndarray, np.ndarray]) -> Sequence[float]:
         """The held object's position (and the true yaw after it) as the tracker computes it."""
         tcp_position, tcp_rotation = tcp
