@@ -32,8 +32,12 @@ class ScriptedExpert:
     finger_reach = 0.025  # 1.5 cm short of where the palm meets the top: at 1 cm a learner a step late hit it
     max_turn_step = 0.03  # rad the hand's yaw is asked to turn per step (the wrist may do 0.04)
     pad_tips_below_tcp = 0.01  # m (urdf: the pads reach 1 cm beyond the tcp)
-    # m of table under the pads' tips where they close. A grip 15 mm above the centre held a
-    # 36 mm box by its top 13 mm, and it turned out of the pads as it rose.
+    # A grip 15 mm above the centre held a 36 mm box by its top 13 mm, and it turned out of the
+    # pads as it rose: on a short object the pads close with its top this far above the tcp (20
+    # mm of pad on it), their tips no nearer the table than tip_clearance. Lower still (every
+    # object as low as the table allows) learners pressing it down at the goal pushed the top of
+    # a 5 cm object into the palm (docs/experiments.md, stop 62).
+    min_top_above_tcp = 0.010
     tip_clearance = 0.012
     align_tolerance = 0.01  # m horizontal error at which the pads' tips may reach the object's top
     funnel_slope = 0.5  # m of horizontal error allowed per m of height above that
@@ -198,14 +202,16 @@ class ScriptedExpert:
         return top + self.pad_tips_below_tcp
 
     def _grasp_offset(self) -> float:
-        """m above the object's centre where the fingers close: as low as the pads' tips may go
-        (``tip_clearance`` above the table), but high enough on a tall object that its top stays
-        ``finger_reach`` short of the palm. Without a shape, ``grasp_height_offset``."""
+        """m above the object's centre where the fingers close: ``grasp_height_offset``, but on a
+        short object low enough that its top stands ``min_top_above_tcp`` above the tcp (no lower
+        than ``tip_clearance`` over the table for the pads' tips), and on a tall one high enough
+        that its top stays ``finger_reach`` short of the palm. Without a shape, ``grasp_height_offset``."""
         shape = self.env.episode.plant.object_shape
         if shape is None:
             return self.grasp_height_offset
         half_height = shape.size[2] / 2.0
-        return max(self.pad_tips_below_tcp + self.tip_clearance - half_height, half_height - self.finger_reach)
+        low = min(self.grasp_height_offset, half_height - self.min_top_above_tcp)
+        return max(self.pad_tips_below_tcp + self.tip_clearance - half_height, low, half_height - self.finger_reach)
 
     def _place_phase(self, state, held: bool):
         """The place task's phases after the grasp, or None while grasping: carry the object above
