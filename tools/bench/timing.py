@@ -44,6 +44,13 @@ the noise of a ROS run, so hundreds of episodes take a minute:
   the guard's start move brings the arm from where the last episode left it, and the episode is
   judged every control period from the policy's first command, as the simulator does.
 
+- **world**: the one the simulator node builds for the model (``chain_emulation.model_world``):
+  its arm and the objects it was trained for (a place model's boxes and cylinders), at the
+  profile's physics step, the task's own solver iterations where they exceed the profile's.
+  Before stop 62 the bench ran every model on the default cup; since, ``models/place`` does
+  23/40 here where the whole rehearsal gives it 21/40 on the same seeds, 9/17 cylinders in both.
+
+Every record names its object (``object``); the JSON counts successes by kind (``by_object``).
 ``--finger-source``, ``--velocity-source`` and ``--episode-start`` override one part of the
 profile, to see what each costs; ``--compute-from`` draws each command's latency from a measured
 record (docs/bench/timing_chain/compute_latency_whole_rehearsal_2026-11-26.json: the policy node
