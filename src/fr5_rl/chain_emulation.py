@@ -276,7 +276,8 @@ class ChainEmulation:
                 if verdict_now.ended:
                     self._pause(arm_command)
                     self.previous_end = sim.joint_positions().tolist()
-                    return {"seed": seed, **placement_record(sim), "success": bool(verdict_now.success), "failure": verdict_now.failure,
+                    return {"seed": seed, **placement_record(sim), "success": bool(verdict_now.success),
+                            "failure": verdict_now.failure,
                             "steps": (k - first_command_step) // self.per_period, "start_move_s": round(start_move_s, 3)}
             if k * self.physics_dt > 120.0:
                 raise RuntimeError(f"seed {seed}: no verdict after 120 s of simulated time (start move stuck?)")
