@@ -68,8 +68,8 @@ class FreshStateWait:
 
     A new state is not enough either: the phase between the driver's clock and the timer, drawn
     at each start, sets how old the newest state is at a tick (0-20 ms at 50 Hz), and behind the
-    emulated FAIRINO driver the place model did 17/20 with states 0 ms old and 0/20 with states
-    12 ms old (docs/experiments.md, stop 61). With ``max_age_s`` a state that arrived longer ago
+    emulated FAIRINO driver the place model did 10/20 with states 0 ms old and 0/20 (12 knocked
+    over) with states 12 ms old; with this wait, 10/20 at 12 ms (docs/experiments.md, stops 61-62). With ``max_age_s`` a state that arrived longer ago
     than that is waited past too, so every period starts just after the driver's state, whatever
     the phase: the node's periods lock onto the driver's.
 
