@@ -325,6 +325,36 @@ def test_a_grip_that_widens_while_told_to_close_still_holds():
     assert released.state is TrackState.HIDDEN, released
 
 
+@pytest.mark.parametrize("with_command", [True, False])
+def test_fingers_opening_off_a_set_down_object_do_not_take_it_back(with_command):
+    """Set down and let go, the fingers open through widths that would hold the object while the
+    hand rises off it: the rehearsal's tracker took that for a lift (the fingers "around it", the
+    tcp lift_evidence above where they were) and carried the object up with the hand, 7 ms after
+    the let-go. Told to open (or, the command unknown, opening from frame to frame), they are not
+    around it: it stays standing where it was set down."""
+    frames = Frames(release_opening=0.004)
+    seen = frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08, commanded=0.08 if with_command else None)
+    centre, size = np.array(seen.position_table), seen.detection.size
+    grasp = tcp_at(*(centre + [0.0, 0.0, 0.01]))
+    held_at = size - 0.002
+    close = 0.0 if with_command else None
+    frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=held_at, commanded=close)
+    assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=held_at, commanded=close).state is TrackState.IN_HAND
+    opening = 0.08 if with_command else None
+    released = frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=grasp, width=held_at + 0.005, commanded=opening, dt=0.02)
+    assert released.state is TrackState.HIDDEN, released
+    # Still within a holding width, the hand already rising: not a lift.
+    width = held_at + 0.005
+    for rise in (0.005, 0.015, 0.03):
+        width += 0.002
+        assert width <= size + frames.tracker.settings.grasp_width_margin
+        hand = tcp_at(*(centre + [0.0, 0.0, 0.01 + rise]))
+        assert frames.tracker.hand_between_frames(frames.stamp, hand, width, opening) is None
+        state = frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=hand, width=width, commanded=opening, dt=0.02)
+        assert state.state is TrackState.HIDDEN, (rise, state)
+        assert state.position_table[2] == pytest.approx(seen.position_table[2])
+
+
 def test_without_the_command_a_widened_grip_has_let_go():
     """The same widening with the command unknown (no ~gripper_command_topic): the old rule."""
     frames = Frames(release_opening=0.004)

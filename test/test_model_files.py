@@ -68,6 +68,9 @@ CASES = [
     ("unknown algorithm", lambda m: edit_meta(m, lambda d: d.update(algo="dqn")), "torch", "meta.json", "unknown algorithm"),
     ("says it observes previous actions its files lack", lambda m: edit_meta(m, lambda d: d["env_overrides"].update(observation={"previous_actions": 2})), "onnx", "meta.json", "retrain"),
     ("trained with another action scaling", lambda m: edit_meta(m, lambda d: d["env_config"]["action"].update(max_joint_step=0.02)), "onnx", "", "retrain"),
+    # Trained with tcp-space actions, its overrides lost: loaded, it would run in joint space.
+    ("trained in tcp space, run in joint space", lambda m: edit_meta(m, lambda d: d["env_config"]["action"].update(
+        space="tcp", max_tcp_translation_step=0.02, max_tcp_rotation_step=0.04)), "torch", "", "action"),
 ]
 
 
@@ -90,6 +93,17 @@ def test_intact_copy_loads_with_both_backends(tmp_path):
         policy = load_policy(model, backend)
         action = policy.act(np.zeros(policy.observation_size, dtype=np.float32))
         assert action.shape == (7,)
+
+
+def test_a_model_saved_before_action_space_existed_loads_in_joint_space(tmp_path):
+    """models/reach's meta.json records the action section without ``space`` (it predates it):
+    it loads, and its deployment shapes joint increments; told it was tcp space, it refuses."""
+    model = copy_model(tmp_path)
+    assert "space" not in json.loads((model / "meta.json").read_text())["env_config"]["action"]
+    assert load_policy(model, "onnx").meta["task"] == "reach"
+    edit_meta(model, lambda d: d["env_config"]["action"].update(space="tcp"))
+    with pytest.raises(ModelFilesError, match="action"):
+        load_policy(model, "onnx")
 
 
 def run_script(script: str, *args: str) -> subprocess.CompletedProcess:

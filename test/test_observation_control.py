@@ -13,9 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fr5_rl.config import load_robot_spec
+from fr5_rl.config import ConfigError, load_robot_spec
 from fr5_rl.env_config import JointStepHintConfig, load_env_config
-from fr5_rl.control import ACTION_SIZE, JointCommandShaper
+from fr5_rl.control import ACTION_SIZE, JointCommandShaper, pointing_down, yaw_of_rotation
+from fr5_rl.kinematics import ForwardKinematics
 from fr5_rl.observation import (
     GRASP_OBSERVATION_SIZE,
     REACH_OBSERVATION_SIZE,
@@ -563,3 +564,105 @@ def test_one_kinematic_chain_serves_the_noisy_tcp_pose_and_the_hint_bit_for_bit(
         chain = kinematics.tcp_jacobian(q)
         assert (chain[0], chain[1]) == kinematics.tcp_position_and_axis(q)
         assert hint(q, target, chain) == hint(q, target)
+
+
+# ----------------------------------------------------------------------------- tcp-space actions
+def tcp_shaper(alpha=1.0) -> JointCommandShaper:
+    cfg = dataclasses.replace(CFG.action, space="tcp", smoothing_alpha=alpha)
+    return JointCommandShaper(SPEC, cfg, CONTROL_DT)
+
+
+KINEMATICS = ForwardKinematics(SPEC)
+HOME = np.asarray(SPEC.home_joint_positions, dtype=float)
+
+
+@pytest.mark.parametrize("translation", [[0.5, 0, 0], [0, -0.5, 0], [0, 0, 0.3], [-0.2, 0.4, -0.3]])
+def test_tcp_action_moves_the_tcp_by_its_step(translation):
+    """A translation-only tcp action moves the tcp by value x max_tcp_translation_step in
+    base_link and leaves its rotation as it was."""
+    position, rotation = KINEMATICS.tcp_pose(HOME)
+    targets = tcp_shaper().arm_targets(action(translation + [0, 0, 0]), HOME)
+    new_position, new_rotation = KINEMATICS.tcp_pose(targets)
+    step = np.asarray(translation) * CFG.action.max_tcp_translation_step
+    np.testing.assert_allclose(new_position - position, step, atol=2e-5)
+    np.testing.assert_allclose(new_rotation, rotation, atol=1e-4)
+
+
+def test_tcp_action_turns_the_tcp_about_base_z():
+    """Value 5 turns the tcp's yaw by value x max_tcp_rotation_step, its position and approach
+    axis kept."""
+    position, rotation = KINEMATICS.tcp_pose(HOME)
+    targets = tcp_shaper().arm_targets(action([0, 0, 0, 0, 0, 0.5]), HOME)
+    new_position, new_rotation = KINEMATICS.tcp_pose(targets)
+    turn = 0.5 * CFG.action.max_tcp_rotation_step
+    expected = np.array([[np.cos(turn), -np.sin(turn), 0], [np.sin(turn), np.cos(turn), 0], [0, 0, 1]]) @ rotation
+    np.testing.assert_allclose(new_rotation, expected, atol=1e-4)
+    np.testing.assert_allclose(new_position, position, atol=2e-5)
+
+
+def test_tcp_action_scaled_whole_to_one_joint_step():
+    """A tcp step larger than one max_joint_step of some joint is shrunk whole: no joint moves
+    more than max_joint_step, one nearly that, and the tcp keeps the step's direction."""
+    cfg = dataclasses.replace(CFG.action, space="tcp", smoothing_alpha=1.0, max_tcp_translation_step=0.2)
+    s = JointCommandShaper(SPEC, cfg, CONTROL_DT)
+    position, _ = KINEMATICS.tcp_pose(HOME)
+    targets = s.arm_targets(action([1, 0, 0, 0, 0, 0]), HOME)
+    largest = np.max(np.abs(targets - HOME))
+    assert 0.9 * CFG.action.max_joint_step <= largest <= CFG.action.max_joint_step + 1e-12
+    moved = KINEMATICS.tcp_pose(targets)[0] - position
+    assert moved[0] > 0.005 and np.hypot(moved[1], moved[2]) < 0.02 * moved[0]
+
+
+def test_tcp_space_targets_respect_limits():
+    rng = np.random.default_rng(2)
+    s = tcp_shaper(alpha=CFG.action.smoothing_alpha)
+    step_limit = SPEC.velocity_limits * CONTROL_DT
+    for _ in range(300):
+        measured = rng.uniform(SPEC.lower_limits, SPEC.upper_limits)
+        targets = s.arm_targets(rng.uniform(-10, 10, ACTION_SIZE), measured)
+        assert np.all(np.isfinite(targets))
+        assert np.all(targets >= SPEC.lower_limits) and np.all(targets <= SPEC.upper_limits)
+        assert np.all(np.abs(targets - measured) <= np.minimum(step_limit, CFG.action.max_joint_step) + 1e-12)
+
+
+@pytest.mark.parametrize("yaw", [0.0, 0.7, -2.5, 3.1])
+def test_pointing_down_has_the_yaw_it_is_given(yaw):
+    rotation = np.asarray(pointing_down(yaw)).reshape(3, 3)
+    np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(rotation) == pytest.approx(1.0)
+    np.testing.assert_allclose(rotation[:, 2], [0.0, 0.0, -1.0])
+    assert yaw_of_rotation(rotation.ravel()) == pytest.approx(yaw)
+
+
+def test_tcp_space_ignores_the_tilt_values_and_rights_a_tilted_hand():
+    """Values 3 and 4 do not tilt the hand; a hand tilted off straight down (the measured joints)
+    is turned back toward it."""
+    s = tcp_shaper()
+    np.testing.assert_allclose(s.arm_targets(action([0, 0, 0, 1, -1, 0]), HOME), HOME, atol=1e-6)
+    tilted = HOME + np.array([0, 0, 0, 0, 0.05, 0])
+    axis_before = KINEMATICS.tcp_pose(tilted)[1][:, 2]
+    targets = s.arm_targets(action(np.zeros(6)), tilted)
+    axis_after = KINEMATICS.tcp_pose(targets)[1][:, 2]
+    assert np.arccos(-axis_after[2]) < np.arccos(-axis_before[2]) - 0.01
+
+
+def test_unknown_action_space_refused():
+    with pytest.raises(ConfigError, match="action.space"):
+        load_env_config({"action": {"space": "cartesian"}})
+
+
+def test_open_close_gripper_opens_fully_above_zero_and_closes_otherwise():
+    """``action.gripper: open_close``: the gripper's value says open (above 0: the whole stroke)
+    or closed, nothing between; ``width`` maps it linearly onto the stroke."""
+    open_close = JointCommandShaper(SPEC, dataclasses.replace(CFG.action, gripper="open_close"), CONTROL_DT)
+    width = JointCommandShaper(SPEC, dataclasses.replace(CFG.action, gripper="width"), CONTROL_DT)
+    for value, expected in ((0.6, MAX_WIDTH), (0.01, MAX_WIDTH), (0.0, 0.0), (-0.3, 0.0), (5.0, MAX_WIDTH)):
+        assert open_close.gripper_width(action(np.zeros(6), value)) == expected, value
+    assert width.gripper_width(action(np.zeros(6), 0.6)) == pytest.approx(0.8 * MAX_WIDTH)
+    with pytest.raises(ValueError):
+        open_close.gripper_width(action(np.zeros(6), np.nan))
+
+
+def test_unknown_gripper_command_refused():
+    with pytest.raises(ConfigError, match="action.gripper"):
+        load_env_config({"action": {"gripper": "half"}})

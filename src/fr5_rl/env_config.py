@@ -31,6 +31,8 @@ class SimulationConfig:
     :param gripper_force: N the fingers squeeze with.
     :param object_spinning_friction: m, the object's torsional friction (PyBullet's
         ``spinningFriction``): what resists the object turning about the pads' axis in the grasp.
+    :param fingers_coupled: the two fingers move as the gripper's linkage moves them, mirrored,
+        so that a held object stays centred; false: each finger on its own.
     """
 
     control_dt: float
@@ -42,6 +44,7 @@ class SimulationConfig:
     finger_position_gain: float
     gripper_force: float
     object_spinning_friction: float
+    fingers_coupled: bool
 
 
 @dataclass(frozen=True)
@@ -118,10 +121,37 @@ class ObjectConfig:
 
 @dataclass(frozen=True)
 class ActionConfig:
-    """``action``: joint increment at |action| = 1 (rad) and the command low-pass."""
+    """``action``: what the arm's six action values mean, their scale, and the command low-pass.
+
+    ``space: joint``: six joint increments, ``max_joint_step`` (rad) at 1. ``space: tcp``: a step
+    of the tcp pointing straight down, its translation in base_link (``max_tcp_translation_step``
+    m at 1) and its turn about the vertical (``max_tcp_rotation_step`` rad at 1), turned into joint
+    increments by the arm's inverse kinematics (:class:`fr5_rl.control.JointCommandShaper`), then
+    limited the same way. ``gripper: width``: the last value is the opening width (-1 closed, +1
+    open); ``open_close``: open above 0, else closed.
+    """
 
     max_joint_step: float
     smoothing_alpha: float
+    space: str
+    max_tcp_translation_step: float
+    max_tcp_rotation_step: float
+    gripper: str
+
+    def check(self, source: str) -> None:
+        if self.space not in ACTION_SPACES:
+            raise ConfigError(f"{source}: 'action.space' must be one of {', '.join(ACTION_SPACES)}, got {self.space!r}")
+        if self.gripper not in GRIPPER_COMMANDS:
+            raise ConfigError(f"{source}: 'action.gripper' must be one of {', '.join(GRIPPER_COMMANDS)}, "
+                              f"got {self.gripper!r}")
+        for name in ("max_tcp_translation_step", "max_tcp_rotation_step"):
+            value = getattr(self, name)
+            if not 0.0 < value < math.inf:
+                raise ConfigError(f"{source}: 'action.{name}' must be a positive number, got {value!r}")
+
+
+ACTION_SPACES = ("joint", "tcp")
+GRIPPER_COMMANDS = ("width", "open_close")
 
 
 @dataclass(frozen=True)

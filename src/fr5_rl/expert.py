@@ -11,6 +11,7 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from .control import yaw_of_rotation
 from .envs import FR5Env
 from .kinematics import InverseKinematics
 from .objects import yaw_of
@@ -68,6 +69,8 @@ class ScriptedExpert:
         # starts (the reverse curriculum).
         self._inverse = InverseKinematics(self.env.kinematics)
         self._max_step = self.env.cfg.action.max_joint_step
+        # The arm's action as a tcp step (action.space: tcp) rather than joint increments.
+        self._tcp_space = self.env.cfg.action.space == "tcp"
         self.phase = "hover"
 
     def reset(self) -> None:
@@ -135,13 +138,31 @@ class ScriptedExpert:
         if distance > step:
             fraction = step / distance
             target = (tcp_x + offset_x * fraction, tcp_y + offset_y * fraction, tcp_z + offset_z * fraction)
-        joint_targets = self._inverse_kinematics(target, q, self._rotation(state, phase, held, hand_yaw))
+        gripper = -1.0 if phase in ("close", "lift", "carry", "lower") else 1.0
+        wanted_rotation = self._rotation(state, phase, held, hand_yaw)
+        if self._tcp_space:
+            return self._tcp_action(q, (target[0] - tcp_x, target[1] - tcp_y, target[2] - tcp_z),
+                                    wanted_rotation, gripper)
+        joint_targets = self._inverse_kinematics(target, q, wanted_rotation)
         max_step = self._max_step
         delta = [(wanted - angle) / max_step for wanted, angle in zip(joint_targets, q)]
         # Scale the whole joint step (not per joint) so the motion keeps its direction.
         scale = max(1.0, max(abs(value) for value in delta))
-        gripper = -1.0 if phase in ("close", "lift", "carry", "lower") else 1.0
         return np.array([value / scale for value in delta] + [gripper], dtype=np.float32)
+
+    def _tcp_action(self, joint_positions: Sequence[float], translation: Sequence[float],
+                    wanted_rotation: Optional[Sequence[float]], gripper: float) -> np.ndarray:
+        """The action of ``action.space: tcp`` for a tcp step of ``translation`` (m, base_link) and
+        a turn to the yaw of ``wanted_rotation`` (9 floats, row-major; None: home's yaw), the arm
+        part scaled whole to at most 1 so that the step keeps its direction; values 3 and 4 (not
+        used by that space) 0."""
+        current_yaw = yaw_of_rotation(self.env.kinematics.tcp_pose_and_jacobian(joint_positions)[1])
+        wanted_yaw = yaw_of_rotation(self._down_rotation if wanted_rotation is None else wanted_rotation)
+        cfg = self.env.cfg.action
+        arm = [value / cfg.max_tcp_translation_step for value in translation] + [0.0, 0.0] + \
+              [math.remainder(wanted_yaw - current_yaw, 2.0 * math.pi) / cfg.max_tcp_rotation_step]
+        scale = max(1.0, max(abs(value) for value in arm))
+        return np.array([value / scale for value in arm] + [gripper], dtype=np.float32)
 
     def _closing(self, to_grasp_point: float) -> bool:
         """Whether to close on the object from ``to_grasp_point`` (m) away: within

@@ -372,7 +372,8 @@ class DelayedTarget:
     arrives the scene at the episode's start is seen (the simulator holds a new scene until a
     frame of it is through). Once the object is in the hand the detector's tracker publishes it
     in the tcp frame, so it is seen without delay. A frame captured while the hand hides the
-    object shows where it was last seen, in a frame or in the hand (the tracker's hold): the
+    object shows where it was last seen, in a frame or in the hand (the tracker's hold; once let
+    go, standing on the table below where the hand left it, as the tracker puts it): the
     target does not follow a push (the tracker's search for a hidden object nudged up to
     ``nudge_radius``, which keeps its track, is not modelled).
 
@@ -402,6 +403,8 @@ class DelayedTarget:
         self._closing_axis = None if closing_axis is None else tuple(closing_axis)
         self._grasp_low: Optional[Tuple[np.ndarray, np.ndarray]] = None  # tcp (position, rotation), lowest around it
         self._in_tcp: Optional[np.ndarray] = None  # the held object's centre in the tcp frame (m)
+        self._in_hand = False  # the last observation had it in the hand
+        self._rest_z: Optional[float] = None  # m, its centre's height standing on the table
 
     def observe(self, position: Sequence[float], now: float, in_hand: bool, hidden: bool = False,
                 tcp: Optional[Tuple[np.ndarray, np.ndarray]] = None, around: bool = False) -> Sequence[float]:
@@ -418,12 +421,21 @@ class DelayedTarget:
             tcp near it), held or not.
         """
         self.history.append((now, position, hidden))
+        if self._rest_z is None:
+            self._rest_z = float(position[2])  # it starts standing on the table
         # Once taken, the tracker keeps it in the hand until the fingers open, set down or not.
         if in_hand or (self._in_tcp is not None and around and tcp is not None):
             if self.hand_from_grasp and tcp is not None:
                 position = self._as_the_tracker_holds(position, tcp)
             self._last_seen, self.seen_at = position, now
+            self._in_hand = True
             return position
+        if self._in_hand and self._last_seen is not None:
+            # Let go: the tracker puts it on the table below where the hand left it
+            # (ObjectTracker._follow_hand). Kept in the air where the hand had it, a policy that
+            # dropped an object 15 mm up came back for it there and pressed the palm onto its top.
+            self._last_seen = (*self._last_seen[:2], self._rest_z, *self._last_seen[3:])
+        self._in_hand = False
         self._in_tcp = None
         if self.hand_from_grasp:
             if not around or tcp is None:

@@ -154,6 +154,18 @@ class OnnxPolicy(Policy):
         return np.asarray(action[0], dtype=np.float64)
 
 
+def comparable_action(section: Any) -> Any:
+    """An ``action`` section as it bears on a model: a model saved before ``action.space`` and
+    ``action.gripper`` existed was trained in joint space with the opening width, and the tcp
+    steps' scale means nothing in joint space."""
+    if not isinstance(section, dict):
+        return section
+    section = {"space": "joint", "gripper": "width", **section}
+    if section["space"] == "joint":
+        section = {key: value for key, value in section.items() if not key.startswith("max_tcp_")}
+    return section
+
+
 def config_mismatches(meta: Mapping[str, Any], current_env: Optional[EnvConfig] = None) -> List[str]:
     """Differences between the configuration a model was trained with and the current one.
 
@@ -170,6 +182,8 @@ def config_mismatches(meta: Mapping[str, Any], current_env: Optional[EnvConfig] 
             for key in path:
                 saved = saved.get(key) if isinstance(saved, dict) else None
                 current = current.get(key) if isinstance(current, dict) else None
+            if path == ("action",):
+                saved, current = comparable_action(saved), comparable_action(current)
             if saved != current:
                 differences.append(f"env {'.'.join(path)}: trained with {saved}, now {current}")
     saved_robot = meta.get("robot_config")

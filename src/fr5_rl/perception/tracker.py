@@ -350,6 +350,7 @@ class ObjectTracker:
         tcp = None if table_from_tcp is None else np.asarray(table_from_tcp, dtype=np.float64)
         closing = (gripper_width is not None and self._last_width is not None
                    and self._last_width - gripper_width > self.settings.closing_tolerance)
+        letting_go = self._letting_go(gripper_width, commanded_width)
         if gripper_width is not None:
             self._last_width = gripper_width
         look = (depth, intrinsics, table_from_optical) if depth is not None and intrinsics is not None \
@@ -392,7 +393,7 @@ class ObjectTracker:
             return result  # no look at where it stands: the track stays as it is
         # Closed on it before the look at where it stood: a fast lift carries it off that spot
         # within a frame, and the bare table there then means "in the hand", not "gone".
-        grasped_from = self._grasp_pose(tcp, gripper_width, stamp)
+        grasped_from = self._grasp_pose(tcp, gripper_width, stamp, letting_go)
         lifted = (tcp is not None and grasped_from is not None and self._grasp_low is not None
                   and tcp[2, 3] - self._grasp_low[2, 3] >= s.lift_evidence)
         if lifted:
@@ -411,7 +412,8 @@ class ObjectTracker:
         return self._held(TrackState.HIDDEN)
 
     def hand_between_frames(self, stamp: float, table_from_tcp: Optional[np.ndarray],
-                            gripper_width: Optional[float]) -> Optional[TrackedObject]:
+                            gripper_width: Optional[float],
+                            commanded_width: Optional[float] = None) -> Optional[TrackedObject]:
         """Between camera frames, from the tcp and the fingers alone: whether a tracked object
         (SEEN or HIDDEN) has just been lifted in the hand (the fingers around it, at a width that
         holds it, and the tcp ``lift_evidence`` above the lowest point where they were). A frame
@@ -421,13 +423,15 @@ class ObjectTracker:
         :param stamp: now (s, the frames' clock).
         :param table_from_tcp: the tcp pose now (4x4, table frame); None: unknown (nothing changes).
         :param gripper_width: the fingers' opening now (m); None: unknown.
+        :param commanded_width: the opening (m) the fingers were last told to go to; None: unknown.
         :return: the object, now IN_HAND, or None when nothing changed.
         """
         if self._track.state not in (TrackState.SEEN, TrackState.HIDDEN) or table_from_tcp is None \
                 or gripper_width is None:
             return None
         tcp = np.asarray(table_from_tcp, dtype=np.float64)
-        if self._grasp_pose(tcp, gripper_width, stamp) is None or self._grasp_low is None \
+        if self._grasp_pose(tcp, gripper_width, stamp, self._letting_go(gripper_width, commanded_width, False)) is None \
+                or self._grasp_low is None \
                 or tcp[2, 3] - self._grasp_low[2, 3] < self.settings.lift_evidence:
             return None
         self._take_into_hand(tcp, self._grasp_low, gripper_width)
@@ -475,7 +479,21 @@ class ObjectTracker:
             return Refusal(RefusalReason.NO_OBJECT, f"not in the hand any more: {gone}")
         return self._held(TrackState.IN_HAND)
 
-    def _grasp_pose(self, tcp: Optional[np.ndarray], width: Optional[float], stamp: float) -> Optional[np.ndarray]:
+    def _letting_go(self, width: Optional[float], commanded: Optional[float], by_trend: bool = True) -> bool:
+        """Whether the fingers, ``width`` (m) open, are opening: told to open wider than they are
+        (``commanded``, m), or, with the command unknown and ``by_trend``, wider than at the last
+        frame. Fingers opening off an object they have let go pass through widths that hold it, and
+        the hand rising from it then looked like a lift: the tracker took a set-down object back
+        into the hand and carried it up with the hand (the rehearsal, stop 63)."""
+        if width is None:
+            return False
+        tolerance = self.settings.closing_tolerance
+        if commanded is not None:
+            return commanded > width + tolerance
+        return by_trend and self._last_width is not None and width - self._last_width > tolerance
+
+    def _grasp_pose(self, tcp: Optional[np.ndarray], width: Optional[float], stamp: float,
+                    letting_go: bool = False) -> Optional[np.ndarray]:
         """The tcp pose (4x4, table frame) at which the fingers came around the tracked object,
         while they stay at a width that holds it; None otherwise.
 
@@ -484,8 +502,11 @@ class ObjectTracker:
         ``grasp_radius`` from where the object stood. The pose of the last frame that had the
         fingers around it is kept until they open past, or close below, its width, the object is
         seen standing, or the track is reset; a frame without the tcp pose or the opening
-        keeps it."""
-        if self._closed_on_it(tcp, width):
+        keeps it. Fingers ``letting_go`` (:meth:`_letting_go`) are not around it: that forgets it."""
+        if letting_go:
+            self._grasp_tcp = None
+            self._grasp_low = None
+        elif self._closed_on_it(tcp, width):
             self._grasp_tcp = np.array(tcp, dtype=np.float64)
             if self._grasp_low is None or tcp[2, 3] < self._grasp_low[2, 3]:
                 self._grasp_low, self._grasp_low_stamp = self._grasp_tcp, stamp

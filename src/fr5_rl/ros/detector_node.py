@@ -291,7 +291,7 @@ class DetectorNode:
         now = rospy.Time.now()
         tcp, width = self.tcp_at(rospy.Time(0)), self.widths.at(now.to_sec())
         with self.tracker_lock:
-            tracked = self.tracker.hand_between_frames(now.to_sec(), tcp, width)
+            tracked = self.tracker.hand_between_frames(now.to_sec(), tcp, width, self.commanded.at(now.to_sec()))
         if tracked is not None:
             try:
                 self.publish_target(tracked, now, self.params.tcp_frame)

@@ -67,6 +67,9 @@ def cap_joint_speeds(body: int, robot: RobotSpec, client: int) -> None:
 
 
 _new_tuple = tuple.__new__
+# N the linkage between the fingers may exert to keep them mirrored: several times the grip (at
+# most 140 N), as stiff as a mechanism next to the motor's limited squeeze.
+_FINGER_COUPLING_FORCE = 1000.0
 
 class Measurement(NamedTuple):
     """One read of the arm (two simulator queries, plain floats: the step path).
@@ -132,6 +135,21 @@ class FR5Robot:
         self._joint_damping: Optional[float] = None  # unknown until set
         cap_joint_speeds(self.body, robot, client)
         self._keep_links_out_of_each_others_pairs()
+        if sim_cfg.fingers_coupled:
+            self._couple_fingers()
+
+    def _couple_fingers(self) -> None:
+        # The PGI-140-80 drives both fingers from one motor through a linkage: they move as a
+        # mirrored pair, so a held object stays centred between them. Two independently
+        # force-limited fingers, both squeezing at their limit, let the pair and the object drift
+        # together along the closing axis with nothing to bring them back: 7 mm (median) to 20 mm
+        # in a carry (docs/experiments.md, stop 63). A gear constraint keeps the two travels equal.
+        left, right = self.finger_joints
+        constraint = p.createConstraint(self.body, left, self.body, right, jointType=p.JOINT_GEAR,
+                                        jointAxis=[0, 1, 0], parentFramePosition=[0, 0, 0],
+                                        childFramePosition=[0, 0, 0], physicsClientId=self.client)
+        p.changeConstraint(constraint, gearRatio=-1, erp=0.2, maxForce=_FINGER_COUPLING_FORCE,
+                           physicsClientId=self.client)
 
     def _keep_links_out_of_each_others_pairs(self) -> None:
         # Loaded without self-collision, the robot's links never touch one another, yet Bullet's
