@@ -141,7 +141,8 @@ class ScriptedExpert:
         gripper = -1.0 if phase in ("close", "lift", "carry", "lower") else 1.0
         wanted_rotation = self._rotation(state, phase, held, hand_yaw)
         if self._tcp_space:
-            return self._tcp_action(q, (target[0] - tcp_x, target[1] - tcp_y, target[2] - tcp_z),
+            current_yaw = self._hand_yaw(state) if hand_yaw is None else hand_yaw
+            return self._tcp_action(current_yaw, (target[0] - tcp_x, target[1] - tcp_y, target[2] - tcp_z),
                                     wanted_rotation, gripper)
         joint_targets = self._inverse_kinematics(target, q, wanted_rotation)
         max_step = self._max_step
@@ -150,13 +151,12 @@ class ScriptedExpert:
         scale = max(1.0, max(abs(value) for value in delta))
         return np.array([value / scale for value in delta] + [gripper], dtype=np.float32)
 
-    def _tcp_action(self, joint_positions: Sequence[float], translation: Sequence[float],
+    def _tcp_action(self, current_yaw: float, translation: Sequence[float],
                     wanted_rotation: Optional[Sequence[float]], gripper: float) -> np.ndarray:
         """The action of ``action.space: tcp`` for a tcp step of ``translation`` (m, base_link) and
-        a turn to the yaw of ``wanted_rotation`` (9 floats, row-major; None: home's yaw), the arm
-        part scaled whole to at most 1 so that the step keeps its direction; values 3 and 4 (not
-        used by that space) 0."""
-        current_yaw = yaw_of_rotation(self.env.kinematics.tcp_pose_and_jacobian(joint_positions)[1])
+        a turn from ``current_yaw`` (rad, :meth:`_hand_yaw`) to the yaw of ``wanted_rotation`` (9
+        floats, row-major; None: home's yaw), the arm part scaled whole to at most 1 so that the
+        step keeps its direction; values 3 and 4 (not used by that space) 0."""
         wanted_yaw = yaw_of_rotation(self._down_rotation if wanted_rotation is None else wanted_rotation)
         cfg = self.env.cfg.action
         arm = [value / cfg.max_tcp_translation_step for value in translation] + [0.0, 0.0] + \
@@ -194,8 +194,7 @@ class ScriptedExpert:
 
     def _hand_yaw(self, state) -> float:
         """The tcp's yaw now (rad, base_link), from the measured joints."""
-        current = self.env.kinematics.tcp_pose(state.joint_positions)[1]
-        return math.atan2(current[1, 0], current[0, 0])
+        return yaw_of_rotation(self.env.kinematics.tcp_pose(state.joint_positions)[1].ravel())
 
     def _grasp_yaw(self, state, hand_yaw: float) -> float:
         """The hand's yaw to grasp the object at (rad, base_link): of the yaws the top's symmetry
