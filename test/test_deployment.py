@@ -109,6 +109,73 @@ def test_resuming_after_a_hold_restarts_the_action_filter():
     assert np.allclose(resumed.arm_positions, fresh.arm_positions)
 
 
+def hand_over_target(height: float = 0.04) -> np.ndarray:
+    """Joint positions (rad) with the tcp ``height`` (m) above TARGET, pointing down."""
+    from fr5_rl.kinematics import ForwardKinematics, InverseKinematics
+
+    kinematics = ForwardKinematics(ROBOT)
+    _, down = kinematics.tcp_pose(ROBOT.home_joint_positions)
+    joints, converged = InverseKinematics(kinematics).solve(
+        ROBOT.home_joint_positions, (TARGET[0], TARGET[1], TARGET[2] + height), np.asarray(down).ravel().tolist(),
+        max_iterations=50)
+    assert converged
+    return np.array(joints)
+
+
+def test_a_stale_target_raises_the_hand_clear_then_holds_then_the_policy_resumes():
+    """With ``stale_target_rise`` the arm rises straight up from where the policy left it (the
+    hand's rotation and the gripper's command kept) until the tcp is that far above the last
+    target, holds there, and hands back to the policy once a fresh target comes."""
+    from fr5_rl.kinematics import ForwardKinematics
+
+    kinematics = ForwardKinematics(ROBOT)
+    step = make_step(action=(0, 0, 0, 0, 0, 0, -1), stale_target_rise=0.2, stale_target_rise_speed=0.25)
+    positions = hand_over_target()
+    first = step(inputs(joints=joint_reading(positions)))
+    assert isinstance(first, Command) and first.gripper_width == pytest.approx(0.0)  # the policy closed it
+    start_position, start_rotation = kinematics.tcp_pose(positions)
+    stale = Reading(TARGET, NOW - 0.6)
+    heights = []
+    for _ in range(200):
+        result = step(inputs(joints=joint_reading(positions), target=stale))
+        if isinstance(result, Hold):
+            break
+        assert result.target_in_base is None and result.gripper_width == pytest.approx(0.0)
+        assert "stale" in step.rising
+        targets = np.array(result.arm_positions)
+        assert np.all(np.abs(targets - positions) <= ROBOT.velocity_limits * DT + 1e-12)
+        positions = targets  # an arm that follows its command
+        position, rotation = kinematics.tcp_pose(positions)
+        heights.append(position[2])
+        assert np.allclose(position[:2], start_position[:2], atol=1e-4)  # straight up
+        assert np.allclose(rotation, start_rotation, atol=1e-4)
+    assert isinstance(result, Hold) and result.reason is HoldReason.TARGET_STALE and "risen" in result.detail
+    assert step.rising is None
+    assert np.all(np.diff(heights) > 0) and np.max(np.diff(heights)) <= 0.25 * DT + 1e-6
+    assert heights[-1] == pytest.approx(TARGET[2] + 0.2, abs=1e-3)
+    assert isinstance(step(inputs(joints=joint_reading(positions), target=stale)), Hold)  # and stays
+    resumed = step(inputs(joints=joint_reading(positions)))
+    assert isinstance(resumed, Command) and resumed.target_in_base == TARGET
+
+
+def test_without_a_rise_or_a_target_acted_on_a_stale_target_holds_at_once():
+    stale = Reading(TARGET, NOW - 0.6)
+    assert make_step(stale_target_rise=0.2)(inputs(target=stale)).reason is HoldReason.TARGET_STALE
+    step = make_step()  # stale_target_rise 0: the default
+    step(inputs())
+    assert step(inputs(target=stale)).reason is HoldReason.TARGET_STALE and step.rising is None
+
+
+def test_the_policy_after_a_rise_starts_without_the_rises_momentum():
+    low = joint_reading(hand_over_target())
+    fresh = make_step()(inputs(joints=low))
+    step = make_step(stale_target_rise=0.2)
+    step(inputs(joints=low))
+    assert isinstance(step(inputs(joints=low, target=Reading(TARGET, NOW - 0.6))), Command) and step.rising
+    resumed = step(inputs(joints=low))
+    assert np.allclose(resumed.arm_positions, fresh.arm_positions)
+
+
 def test_a_new_object_restarts_the_action_filter():
     fresh = make_step()(inputs(target=Reading((-0.4, -0.2, 0.03), NOW)))
     step = make_step()

@@ -192,6 +192,35 @@ def test_a_frame_captured_while_the_hand_hides_the_object_shows_where_it_was_las
     assert slip.observe((1.5, 0.0, 0.05), 0.06, in_hand=False, hidden=True)[:3] == pytest.approx((1.2, 0.0, 0.05))
 
 
+def test_an_object_hidden_longer_than_the_trackers_timeout_is_no_longer_published():
+    """hidden_timeout: as the detector's tracker drops a track hidden for longer than its
+    hidden_timeout, the target's capture time (seen_at) stops advancing (the policy node then
+    finds it stale), and advances again from the first frame that shows the object; the object
+    in the hand counts as a sighting. Without it, every hidden frame is published."""
+    from fr5_rl.observation import DelayedTarget, tracker_hidden_timeout
+
+    assert tracker_hidden_timeout() == pytest.approx(2.0)  # config/detector.yaml's
+    for timeout in (None, 1.0):
+        target = DelayedTarget(latency=0.0, frame_period=0.1, phase=0.0, hidden_timeout=timeout)
+        stamps = []
+        for k in range(40):  # seen until 0.5 s, hidden until 2.5 s, then seen again
+            target.observe((0.3, 0.0, 0.0), 0.1 * k, in_hand=False, hidden=5 <= k < 25)
+            stamps.append(target.seen_at)
+        if timeout is None:
+            assert stamps == pytest.approx([0.1 * k for k in range(40)])
+        else:
+            assert stamps[:15] == pytest.approx([0.1 * k for k in range(15)])  # 1.0 s after the sighting at 0.4 s
+            assert stamps[15:25] == pytest.approx([1.4] * 10)  # dropped: nothing new
+            assert stamps[25:] == pytest.approx([0.1 * k for k in range(25, 40)])
+    held = DelayedTarget(latency=0.0, frame_period=0.1, phase=0.0, hidden_timeout=1.0)
+    held.observe((0.3, 0.0, 0.0), 0.0, in_hand=False)
+    held.observe((0.3, 0.0, 0.1), 0.8, in_hand=True, hidden=True)
+    held.observe((0.3, 0.0, 0.0), 1.5, in_hand=False, hidden=True)  # let go under the hand at 0.8 s
+    assert held.seen_at == pytest.approx(1.5)
+    held.observe((0.3, 0.0, 0.0), 1.9, in_hand=False, hidden=True)
+    assert held.seen_at == pytest.approx(1.5)
+
+
 def test_a_held_object_is_seen_where_the_tracker_puts_it():
     """randomisation.target_in_hand_from_grasp: held, the object is fixed in the tcp frame as it
     was last seen relative to the lowest tcp pose with the fingers around it, centred between the

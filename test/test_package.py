@@ -82,6 +82,32 @@ def test_vision_target_truth_moves_the_detector_off_the_policys_target(driver):
         params("vision_target:=camera")
 
 
+@pytest.mark.parametrize("driver", ["default", "fairino"])
+def test_with_vision_the_policy_node_takes_policy_node_vision_yaml(driver):
+    """vision:=true gives the policy node config/policy_node_vision.yaml over policy_node.yaml (the
+    emulated chain's --target camera reads the same file): the rise clear of a target gone stale,
+    and the target timeout, which sim_policy.launch's vision_target_timeout (the detector's
+    max_image_age too) must equal; without vision, policy_node.yaml's hold in place."""
+    import roslaunch.config
+    import roslaunch.xmlloader
+
+    from fr5_rl.config import load_yaml
+
+    def policy_params(*args):
+        config = roslaunch.config.ROSLaunchConfig()
+        roslaunch.xmlloader.XmlLoader().load(str(ROOT / "launch" / "sim_policy.launch"), config, verbose=False,
+                                             argv=["sim_policy.launch", "rviz:=false", f"driver:={driver}", *args])
+        return {key.rsplit("/", 1)[1]: param.value for key, param in config.params.items()
+                if key.startswith("/fr5_policy/")}
+
+    vision, plain = load_yaml("policy_node_vision"), load_yaml("policy_node")
+    assert vision["stale_target_rise"] > 0.0 == plain["stale_target_rise"]
+    seen = policy_params("vision:=true")
+    assert seen["stale_target_rise"] == vision["stale_target_rise"]
+    assert seen["target_timeout"] == vision["target_timeout"]
+    assert policy_params()["stale_target_rise"] == 0.0
+
+
 def test_every_script_is_a_thin_installed_entry_point():
     cmake = (ROOT / "CMakeLists.txt").read_text()
     for script in sorted((ROOT / "scripts").glob("*.py")):

@@ -311,6 +311,47 @@ class TestTheExpertsLabelsWhereLearnersStalled:
         assert moved[0] < -0.002  # toward the object
         assert abs(moved[2]) < 0.5 * abs(moved[0]), moved
 
+    def test_letting_go_the_hand_rises_only_once_the_fingers_clear_the_object(self, monkeypatch):
+        """Stop 64: at 90 % of the stroke (72 mm) the hand rose 2 mm over the grip of a 70 mm
+        object, and a learner, unable to tell the two widths apart, rose while it held it. The
+        hand now waits for the object's width across the fingers and a margin."""
+        env = FR5Env("place", config={"object": {"variety": {"enabled": True, "kinds": ["cylinder"]}}})
+        try:
+            wide = next(seed for seed in range(300)
+                        if env.reset(seed=seed) is not None and env.episode.plant.object_shape.size[1] > 0.066)
+            env.reset(seed=wide)
+            state = env.task_state()
+            goal_x, goal_y, _ = env.task.goal
+            standing = (goal_x, goal_y, state.object_start_position[2])  # set down on the goal
+            diameter = env.episode.plant.object_shape.size[1]
+            common = dict(object_position=standing, fingers_object_contact=0,
+                          tcp_position=(goal_x, goal_y, standing[2] + 0.01))
+            width = env.robot_spec.max_opening_width
+            for opening, expected in ((0.9 * width, "release"), (diameter + 0.004, "release"),
+                                      (min(diameter + 0.009, 0.96 * width), "retreat")):
+                phase, action = self.label(env, monkeypatch, command_width=width, gripper_width=opening, **common)
+                assert phase == expected, (opening, diameter)
+                assert action[6] == 1.0
+        finally:
+            env.close()
+
+    def test_over_a_cylinder_the_hand_keeps_whatever_yaw_it_has(self, monkeypatch):
+        """A cylinder's yaw does not matter: the label never turns the hand (before stop 64 it
+        turned it back to home's yaw, which a learner could only read off the joints)."""
+        env = FR5Env("place", config={"object": {"variety": {"enabled": True, "kinds": ["cylinder"]}},
+                                      "action": {"space": "tcp"}})
+        try:
+            env.reset(seed=5)
+            turned = np.array(env.task_state().joint_positions)
+            turned[5] += 0.5  # the wrist turned half a radian away from home's yaw
+            x, y, z = env.task_state().object_position
+            for tcp, contacts in (((x + 0.05, y, z + 0.1), 0), ((x, y, z + 0.03), 0), ((x, y, z + 0.015), 2)):
+                _, action = self.label(env, monkeypatch, joint_positions=tuple(turned), tcp_position=tcp,
+                                       fingers_object_contact=contacts)
+                assert action[5] == pytest.approx(0.0, abs=1e-6)
+        finally:
+            env.close()
+
     def test_over_a_square_top_the_hand_keeps_the_aligned_yaw_it_has(self, monkeypatch):
         """A square top looks the same every quarter turn, and so does the observation's
         (sin 4Δ, cos 4Δ); a hand aligned a quarter turn from home's choice is told not to turn."""

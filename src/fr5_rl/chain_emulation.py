@@ -24,7 +24,7 @@ from .episode import Episode, placement_record
 from .episode_runner import simulator_episode
 from .motion_guard import load_guard_settings
 from .objects import yaw_of
-from .observation import DelayedTarget
+from .observation import DelayedTarget, tracker_hidden_timeout
 from .sim.controller_emulator import ControllerEmulator
 from .sim.gripper_chain import ChainClock, InProcessController
 from .sim.node_params import SimNodeParams, load_sim_node_params
@@ -87,7 +87,7 @@ class ChainEmulation:
                  hidden_radius: float = CAMERA_HIDDEN_RADIUS_M,
                  compute_samples_s: Optional[Sequence[float]] = None,
                  state_jitter_s: float = 0.0, fresh_state_wait_s: float = 0.0, fresh_state_max_age_s: float = 0.0,
-                 policy_phase_s: Optional[float] = None) -> None:
+                 policy_phase_s: Optional[float] = None, drop_hidden: bool = True) -> None:
         self.sim, self.step, self.chain, self.rng = sim, step, chain, rng
         self.robot = sim.robot_spec
         self.physics_dt = params.physics_dt
@@ -133,6 +133,9 @@ class ChainEmulation:
         camera = load_env_config().randomisation  # the measured camera timing (config/sim.yaml)
         self.target_latency_s, self.target_period_s = tuple(camera.target_latency_s), 1.0 / camera.target_rate_hz
         self.hidden_radius = hidden_radius
+        # The camera's target dropped as the detector's tracker drops an object hidden too long
+        # (drop_hidden; False: believed where it was last seen however long it stays hidden).
+        self.hidden_timeout = tracker_hidden_timeout() if drop_hidden else None
 
     def _start_bridge(self, params: SimNodeParams) -> None:
         self.emulator = ControllerEmulator(params.controller_emulator, 0, self.clock)  # never started: no socket
@@ -223,9 +226,11 @@ class ChainEmulation:
             publish_phase, policy_phase = 0, (-self.policy_phase_steps) % self.per_period
         camera, episode_start_s = None, self.clock.now
         if self.chain.target == "camera":
+            # Held where the tracker puts it, not the truth; dropped, as the tracker drops it, once
+            # hidden for longer than its hidden_timeout (the node then finds its target stale).
             camera = DelayedTarget(float(self.rng.uniform(*self.target_latency_s)), self.target_period_s,
                                    float(self.rng.uniform(0.0, self.target_period_s)),
-                                   hand_from_grasp=True)  # held where the tracker puts it, not the truth
+                                   hand_from_grasp=True, hidden_timeout=self.hidden_timeout)
         arm_command: Optional[Sequence[float]] = None
         gripper_width = self.robot.max_opening_width
         pending: List[tuple] = []  # (physics step it arrives at, arm targets, gripper width, from the policy)

@@ -363,6 +363,13 @@ def tracker_closing_axis() -> Tuple[float, ...]:
     return tuple(float(v) for v in load_yaml("detector")["tracker"]["closing_axis"])
 
 
+def tracker_hidden_timeout() -> Optional[float]:
+    """The detector's tracker's ``hidden_timeout`` (s, config/detector.yaml): how long a hidden
+    object is still believed where it was last seen; None where the file switches tracking off (0)."""
+    value = float(load_yaml("detector")["tracker"]["hidden_timeout"])
+    return value if value > 0.0 else None
+
+
 class DelayedTarget:
     """The object's position (and yaw, appended to it) as a camera and the detector deliver it
     (``randomisation.target_share``).
@@ -389,10 +396,15 @@ class DelayedTarget:
     :param hand_from_grasp: the held object as the tracker computes it (see above).
     :param closing_axis: the direction (tcp frame) the fingers close along; None: the tracker's
         own (config/detector.yaml ``tracker.closing_axis``).
+    :param hidden_timeout: s after its last sighting (in a frame, or in the hand) that a hidden
+        object is dropped, as the tracker drops it (config/detector.yaml ``tracker.hidden_timeout``):
+        nothing new is published until a frame shows it again, so :attr:`seen_at` stops advancing
+        and the policy node finds its target stale. None: never (the training world's policy acts
+        on every period).
     """
 
     def __init__(self, latency: float, frame_period: float, phase: float, hand_from_grasp: bool = False,
-                 closing_axis: Optional[Sequence[float]] = None) -> None:
+                 closing_axis: Optional[Sequence[float]] = None, hidden_timeout: Optional[float] = None) -> None:
         self.latency, self.frame_period, self.phase = latency, frame_period, phase
         self.history: deque = deque()  # (time s, position, hidden) of every period, oldest first
         self._last_seen: Optional[Sequence[float]] = None  # the newest position seen, in a frame or in the hand
@@ -405,6 +417,8 @@ class DelayedTarget:
         self._in_tcp: Optional[np.ndarray] = None  # the held object's centre in the tcp frame (m)
         self._in_hand = False  # the last observation had it in the hand
         self._rest_z: Optional[float] = None  # m, its centre's height standing on the table
+        self.hidden_timeout = hidden_timeout
+        self._sighted_at = 0.0  # s: the capture of the last frame that showed it, or the last period in the hand
 
     def observe(self, position: Sequence[float], now: float, in_hand: bool, hidden: bool = False,
                 tcp: Optional[Tuple[np.ndarray, np.ndarray]] = None, around: bool = False) -> Sequence[float]:
@@ -428,6 +442,7 @@ class DelayedTarget:
             if self.hand_from_grasp and tcp is not None:
                 position = self._as_the_tracker_holds(position, tcp)
             self._last_seen, self.seen_at = position, now
+            self._sighted_at = now
             self._in_hand = True
             return position
         if self._in_hand and self._last_seen is not None:
@@ -451,10 +466,11 @@ class DelayedTarget:
         while len(self.history) > 1 and self.history[1][0] <= capture + 1e-9:
             self.history.popleft()
         _, captured, captured_hidden = self.history[0]
-        self.seen_at = capture
         if captured_hidden and self._last_seen is not None:
+            if self.hidden_timeout is None or capture - self._sighted_at <= self.hidden_timeout:
+                self.seen_at = capture  # the tracker's hold: published with each frame
             return self._last_seen
-        self._last_seen = captured
+        self._last_seen, self.seen_at, self._sighted_at = captured, capture, capture
         return captured
 
     @property

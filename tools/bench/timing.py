@@ -3,7 +3,7 @@
     python tools/bench/timing.py [--model models/reach] [--episodes 600] [--seed 900000]
                                  [--profile fairino|default] [--compute-ms 2]
                                  [--finger-source ...] [--velocity-source ...] [--episode-start ...]
-                                 [--target simulator|camera] [--hidden-radius 0.15] [--compute-from FILE]
+                                 [--target simulator|camera] [--hidden-radius 0.15] [--keep-hidden] [--compute-from FILE]
                                  [--state-jitter-ms 0] [--fresh-state-wait-ms 15]
 
 A twenty-episode ROS run says little about a 90 % target: its confidence interval spans about
@@ -31,7 +31,10 @@ the noise of a ROS run, so hundreds of episodes take a minute:
   ``randomisation.target_rate_hz`` with a random phase, each reaching the node a latency drawn
   per episode from ``randomisation.target_latency_s`` (config/env.yaml: the vision bench's
   measured range) after its capture, stamped with its capture time; held where it was last seen
-  while the tcp is within ``--hidden-radius`` of it (the hand hides it: the tracker's hold); in
+  while the tcp is within ``--hidden-radius`` of it (the hand hides it: the tracker's hold), for
+  the tracker's ``hidden_timeout`` at most: then nothing new comes, the target goes stale, and the
+  node (config/policy_node_vision.yaml) rises clear until a frame shows the object again
+  (``--keep-hidden``: held however long); in
   the tcp frame, without delay, once the object is in the hand
   (``Episode.held_as_the_camera_sees``), where the tracker puts it: fixed in the tcp frame as it
   was last seen relative to the lowest tcp pose with the fingers around it, until they open
@@ -90,7 +93,7 @@ import numpy as np
 from benchlib import AT_LEAST, REPO, RESULTS_DIR, relative_path, update_summary, verdict, write_result
 
 from fr5_rl.chain_emulation import CAMERA_HIDDEN_RADIUS_M, Chain, ChainEmulation, model_world, simulator_profile
-from fr5_rl.config import load_robot_spec
+from fr5_rl.config import load_robot_spec, load_yaml
 from fr5_rl.deploy.deployment import DeploymentStep
 from fr5_rl.deploy.policy_node_params import load_policy_node_params
 from fr5_rl.deploy.policy import load_policy
@@ -118,6 +121,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--hidden-radius", type=float, default=CAMERA_HIDDEN_RADIUS_M,
                         help=f"--target camera: m, tcp to object within which the hand hides it (default "
                              f"{CAMERA_HIDDEN_RADIUS_M}, measured through ROS; 0: always seen)")
+    parser.add_argument("--keep-hidden", action="store_true",
+                        help="--target camera: believe a hidden object where it was last seen however long the hand "
+                             "hides it (default: dropped after the tracker's hidden_timeout, config/detector.yaml, "
+                             "as the detector drops it; the node then finds its target stale)")
+    parser.add_argument("--stale-target-rise", type=float, default=None, metavar="M",
+                        help="the node's ~stale_target_rise (m; default config/policy_node.yaml's, with --target "
+                             "camera config/policy_node_vision.yaml's); 0: hold in place on a stale target")
     parser.add_argument("--compute-from", type=Path, default=None,
                         help="draw each period's compute latency from a JSON file with 'compute_latency_s': [s, ...] "
                              "(the policy node's ~timing, e.g. docs/bench/timing_chain/"
@@ -148,14 +158,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     chain = Chain.of(params, args)
     task = policy.task
     sim = model_world(policy.meta, params)
-    node = load_policy_node_params()
+    # A camera's target: the node's settings as the launch files give them with vision:=true.
+    node = load_policy_node_params(load_yaml("policy_node_vision") if chain.target == "camera" else None)
+    if args.stale_target_rise is not None:
+        node = dataclasses.replace(node, stale_target_rise=args.stale_target_rise)
     guard = dataclasses.replace(node.guard, go_to_start=True)  # the bench makes the start moves itself
     trained = load_env_config(policy.meta.get("env_overrides", {}))
     step = DeploymentStep(policy, robot, trained,
                           node.joint_state_timeout, node.target_timeout,
                           target_workspace_margin=node.target_workspace_margin,
                           future_stamp_tolerance=node.future_stamp_tolerance,
-                          guard=guard if chain.episode_start == "go_to_start" else None)
+                          guard=guard if chain.episode_start == "go_to_start" else None,
+                          stale_target_rise=node.stale_target_rise, stale_target_rise_speed=node.stale_target_rise_speed)
     fresh_state_wait_s = (node.fresh_state_wait if args.fresh_state_wait_ms is None
                           else args.fresh_state_wait_ms / 1000.0)
     fresh_state_max_age_s = (node.fresh_state_max_age if args.fresh_state_max_age_ms is None
@@ -167,7 +181,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                 trained.observation.joint_velocity_source, args.hidden_radius,
                                 compute_samples, args.state_jitter_ms / 1000.0, fresh_state_wait_s,
                                 fresh_state_max_age_s,
-                                None if args.policy_phase_ms is None else args.policy_phase_ms / 1000.0)
+                                None if args.policy_phase_ms is None else args.policy_phase_ms / 1000.0,
+                                drop_hidden=not args.keep_hidden)
     records = [emulation.run_episode(args.seed + index) for index in range(args.episodes)]
     sim.close()
     successes = sum(record["success"] for record in records)

@@ -22,7 +22,7 @@ from ..config import RobotSpec
 from ..env_config import EnvConfig
 from ..motion_guard import MotionGuard, MotionGuardSettings, StartPhase
 from ..control import JointCommandShaper
-from ..kinematics import ForwardKinematics
+from ..kinematics import ForwardKinematics, InverseKinematics
 from ..objects import ObjectShape
 from ..observation import TASK_BLOCKS, ActionHistory, ObservationBuilder, ObservationInputs, goal_features, object_features
 from .bundle import ModelFilesError
@@ -246,11 +246,18 @@ class DeploymentStep:
         comes from a clock that cannot be trusted: hold.
     :param guard: the real arm's start move, ramp-in and joint-limit margin
         (:class:`~fr5_rl.motion_guard.MotionGuard`); None: none (as in training).
+    :param stale_target_rise: on a stale target, the tcp rises straight up (its rotation and the
+        gripper's command kept) until it is this far (m) above the last target the policy acted
+        on, then holds; 0: hold where it is. The arm hovering over an object hides it from the
+        camera, and the detector's tracker drops a track hidden for longer than its
+        ``hidden_timeout``: held there, nothing would ever show it again.
+    :param stale_target_rise_speed: m/s of that rise.
     """
 
     def __init__(self, policy: Policy, robot: RobotSpec, env_cfg: EnvConfig, joint_state_timeout: float,
                  target_timeout: float, new_target_jump: float = 0.05, target_workspace_margin: float = 0.05,
-                 future_stamp_tolerance: float = 0.05, guard: Optional[MotionGuardSettings] = None) -> None:
+                 future_stamp_tolerance: float = 0.05, guard: Optional[MotionGuardSettings] = None,
+                 stale_target_rise: float = 0.0, stale_target_rise_speed: float = 0.1) -> None:
         self.policy = policy
         self.control_dt = env_cfg.simulation.control_dt
         self.kinematics = ForwardKinematics(robot)
@@ -289,6 +296,14 @@ class DeploymentStep:
         self.gripper_command_width = robot.max_opening_width
         self.last_hold: Optional[Hold] = Hold(HoldReason.NO_JOINT_STATE, "starting")
         self._last_target: Optional[np.ndarray] = None
+        if stale_target_rise < 0.0 or stale_target_rise_speed <= 0.0:
+            raise ValueError(f"stale_target_rise must be >= 0 m and its speed > 0 m/s, got {stale_target_rise} m "
+                             f"at {stale_target_rise_speed} m/s")
+        self.stale_target_rise = float(stale_target_rise)
+        self.rise_step = float(stale_target_rise_speed) * self.control_dt
+        self._inverse = InverseKinematics(self.kinematics) if self.stale_target_rise > 0.0 else None
+        # Why the arm is rising clear of a stale target's object (None: it is not).
+        self.rising: Optional[str] = None
 
     def start_episode(self) -> None:
         """Start as an episode starts in training: no action-filter momentum, the gripper
@@ -348,7 +363,13 @@ class DeploymentStep:
                             f"(> {self.future_stamp_tolerance:g} s): check the camera computer's clock")
             age = max(age, -ahead)  # judged by capture time: a pipeline may deliver old detections
         if age > self.target_timeout:
-            return Hold(HoldReason.TARGET_STALE, f"{age:.2f} s old > {self.target_timeout:g} s")
+            return self._rise_or_hold(joints.value.positions, f"{age:.2f} s old > {self.target_timeout:g} s",
+                                      inputs.now)
+        if self.rising is not None:
+            # The policy again, straight after a rise: as after a hold, without the rise's momentum.
+            self.shaper.reset()
+            self.action_history.reset()
+            self.rising = None
         target_pose = np.asarray(target.value, dtype=np.float64).reshape(-1)
         if target_pose.shape not in ((3,), (4,)):
             return Hold(HoldReason.TARGET_INVALID, f"target needs a position (3 values) and maybe a yaw, got {target.value}")
@@ -401,6 +422,31 @@ class DeploymentStep:
         self.action_history.push(action)
         return Command(tuple(targets.tolist()), self.gripper_command_width,
                        tuple(target_in_base.tolist()), inference)
+
+    def _rise_or_hold(self, measured: np.ndarray, stale: str, now: float) -> Union[Command, Hold]:
+        """On a stale target: one period of the rise clear of the last target (``stale_target_rise``),
+        or the hold once risen, or at once when there is no rise or no target acted on yet."""
+        if self.stale_target_rise <= 0.0 or self._last_target is None:
+            self.rising = None
+            return Hold(HoldReason.TARGET_STALE, stale)
+        tcp_position, tcp_rotation = self.kinematics.tcp_pose(measured)
+        top = float(self._last_target[2]) + self.stale_target_rise
+        climb = min(self.rise_step, top - float(tcp_position[2]))
+        if climb <= 1e-4:
+            self.rising = None
+            return Hold(HoldReason.TARGET_STALE, f"{stale}; risen {self.stale_target_rise:g} m above where the object "
+                                                 "was last seen, waiting for the camera to find it")
+        wanted = np.asarray(tcp_position, dtype=np.float64) + np.array([0.0, 0.0, climb])
+        targets, _ = self._inverse.solve(measured, wanted.tolist(), np.asarray(tcp_rotation).ravel().tolist())
+        targets = np.asarray(targets, dtype=np.float64)
+        if self.guard is not None:
+            targets = self.guard.limit(targets, measured, now)
+        problem = self.gate.check(targets, measured)
+        if problem is not None:
+            self.rising = None
+            return Hold(HoldReason.TARGET_STALE, f"{stale}; cannot rise clear: {problem}")
+        self.rising = f"target stale ({stale}): rising clear of where the object was last seen, so that the camera sees it"
+        return Command(tuple(targets.tolist()), self.gripper_command_width, None, 0.0)
 
     def _object_and_goal(self, inputs: StepInputs, target_pose: np.ndarray, tcp_rotation: np.ndarray):
         """The observation's object block (shape, size, yaw), its goal block, each empty where the
@@ -457,3 +503,4 @@ class DeploymentStep:
         self.action_history.reset()
         self.gripper_command_width = self.max_opening_width
         self._last_target = None
+        self.rising = None

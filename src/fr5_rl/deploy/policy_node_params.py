@@ -22,6 +22,8 @@ class PolicyNodeParams:
     base_frame: str
     joint_state_timeout: float
     target_timeout: float
+    stale_target_rise: float  # m above the last target the tcp rises to on a stale target; 0: hold in place
+    stale_target_rise_speed: float  # m/s
     future_stamp_tolerance: float
     target_workspace_margin: float
     joint_states_topic: str
@@ -61,8 +63,11 @@ class PolicyNodeParams:
                               f"({1.0 / self.rate:g} s), got {self.fresh_state_max_age}")
         if self.backend not in ("torch", "onnx"):
             raise ConfigError(f"{source}: 'backend' must be torch or onnx, got {self.backend!r}")
+        if not 0.0 <= self.stale_target_rise <= 0.5:
+            raise ConfigError(f"{source}: 'stale_target_rise' must be 0 (off) to 0.5 m, got {self.stale_target_rise}")
         check_positive(source, rate=self.rate, joint_state_timeout=self.joint_state_timeout,
-                       target_timeout=self.target_timeout, start_move_timeout=self.start_move_timeout)
+                       target_timeout=self.target_timeout, start_move_timeout=self.start_move_timeout,
+                       stale_target_rise_speed=self.stale_target_rise_speed)
 
 
 def load_policy_node_params(overrides: Optional[Mapping[str, Any]] = None) -> PolicyNodeParams:

@@ -85,7 +85,9 @@ class PolicyNode:
         self.step = DeploymentStep(policy, robot, env_cfg, params.joint_state_timeout, params.target_timeout,
                                    target_workspace_margin=params.target_workspace_margin,
                                    future_stamp_tolerance=params.future_stamp_tolerance,
-                                   guard=params.guard if params.motion_guard else None)
+                                   guard=params.guard if params.motion_guard else None,
+                                   stale_target_rise=params.stale_target_rise,
+                                   stale_target_rise_speed=params.stale_target_rise_speed)
         self.control_dt = self.step.control_dt
         if abs(params.rate * self.control_dt - 1.0) > 1e-6:
             raise ConfigError(f"~rate = {params.rate:g} Hz but the model was trained at {1.0 / self.control_dt:g} Hz: "
@@ -342,6 +344,7 @@ class PolicyNode:
                     return
                 self.last_input_stamp = joint_state.stamp
             previous_hold = self.step.last_hold
+            was_rising = self.step.rising is not None
             previous_phase = self.step.guard.phase if self.step.guard is not None else None
             result = self.step(StepInputs(time.monotonic(), joint_state, self.target_in_base(),
                                           rospy.Time.now().to_sec(), self.gripper_fault, self.object_shape,
@@ -351,8 +354,11 @@ class PolicyNode:
         if isinstance(result, Hold):
             self.report_hold(result, previous_hold)
             return
-        if previous_hold is not None:
-            rospy.loginfo(f"policy_node: inputs good, running (was: {previous_hold})")
+        if self.step.rising is not None:
+            if not was_rising:
+                rospy.logwarn(f"policy_node: {self.step.rising}")
+        elif previous_hold is not None or was_rising:
+            rospy.loginfo(f"policy_node: inputs good, running (was: {previous_hold or 'rising clear'})")
         self.publish(result)
         stamp = self.joint_state_stamp
         state_age = (rospy.Time.now() - stamp).to_sec() if stamp.to_sec() > 0 else float("nan")
@@ -419,6 +425,8 @@ class PolicyNode:
             status.values.append(KeyValue("joint_state_jump", latched))
         elif hold is not None:
             status.level, status.message = DiagnosticStatus.WARN, f"holding: {hold}"
+        elif self.step.rising is not None:
+            status.level, status.message = DiagnosticStatus.WARN, self.step.rising
         else:
             status.level, status.message = DiagnosticStatus.OK, "running"
         samples = np.array(self.timing) if self.timing else np.zeros((0, len(TIMING_FIELDS)))
