@@ -122,40 +122,61 @@ def hand_over_target(height: float = 0.04) -> np.ndarray:
     return np.array(joints)
 
 
-def test_a_stale_target_raises_the_hand_clear_then_holds_then_the_policy_resumes():
-    """With ``stale_target_rise`` the arm rises straight up from where the policy left it (the
-    hand's rotation and the gripper's command kept) until the tcp is that far above the last
-    target, holds there, and hands back to the policy once a fresh target comes."""
+def rise_on_a_stale_target(target, periods=300):
+    """Run a closing policy over ``target`` (m, base_link) once, then the target stale with an arm
+    that follows its commands: (the step, every command or hold, the tcp heights, the tcp pose
+    at the start)."""
     from fr5_rl.kinematics import ForwardKinematics
 
     kinematics = ForwardKinematics(ROBOT)
     step = make_step(action=(0, 0, 0, 0, 0, 0, -1), stale_target_rise=0.2, stale_target_rise_speed=0.25)
     positions = hand_over_target()
-    first = step(inputs(joints=joint_reading(positions)))
+    first = step(inputs(joints=joint_reading(positions), target=Reading(target, NOW)))
     assert isinstance(first, Command) and first.gripper_width == pytest.approx(0.0)  # the policy closed it
-    start_position, start_rotation = kinematics.tcp_pose(positions)
-    stale = Reading(TARGET, NOW - 0.6)
-    heights = []
-    for _ in range(200):
-        result = step(inputs(joints=joint_reading(positions), target=stale))
+    start = kinematics.tcp_pose(positions)
+    results, heights = [], []
+    for _ in range(periods):
+        result = step(inputs(joints=joint_reading(positions), target=Reading(target, NOW - 0.6)))
+        results.append(result)
         if isinstance(result, Hold):
             break
-        assert result.target_in_base is None and result.gripper_width == pytest.approx(0.0)
-        assert "stale" in step.rising
+        assert result.target_in_base is None and "stale" in step.rising
         targets = np.array(result.arm_positions)
         assert np.all(np.abs(targets - positions) <= ROBOT.velocity_limits * DT + 1e-12)
         positions = targets  # an arm that follows its command
         position, rotation = kinematics.tcp_pose(positions)
         heights.append(position[2])
-        assert np.allclose(position[:2], start_position[:2], atol=1e-4)  # straight up
-        assert np.allclose(rotation, start_rotation, atol=1e-4)
-    assert isinstance(result, Hold) and result.reason is HoldReason.TARGET_STALE and "risen" in result.detail
+        assert np.allclose(position[:2], start[0][:2], atol=1e-4)  # straight up
+        assert np.allclose(rotation, start[1], atol=1e-4)
+    return step, results, np.array(heights), positions
+
+
+def test_a_stale_target_lets_go_of_a_standing_object_rises_clear_holds_then_the_policy_resumes():
+    """With ``stale_target_rise``, over an object last seen standing: the fingers open with the
+    arm still for STALE_TARGET_OPEN_S, then the tcp rises straight up (its rotation kept) until
+    it is that far above the last target, holds there, and hands back to the policy once a fresh
+    target comes."""
+    step, results, heights, positions = rise_on_a_stale_target(TARGET)
+    opening = int(round(DeploymentStep.STALE_TARGET_OPEN_S / DT))
+    assert all(r.gripper_width == pytest.approx(ROBOT.max_opening_width) for r in results[:-1])
+    assert np.ptp(heights[:opening]) < 1e-9 and np.all(np.diff(heights[opening:]) > 0)
+    assert np.max(np.diff(heights)) <= 0.25 * DT + 1e-6
+    last = results[-1]
+    assert isinstance(last, Hold) and last.reason is HoldReason.TARGET_STALE and "risen" in last.detail
     assert step.rising is None
-    assert np.all(np.diff(heights) > 0) and np.max(np.diff(heights)) <= 0.25 * DT + 1e-6
     assert heights[-1] == pytest.approx(TARGET[2] + 0.2, abs=1e-3)
-    assert isinstance(step(inputs(joints=joint_reading(positions), target=stale)), Hold)  # and stays
+    assert isinstance(step(inputs(joints=joint_reading(positions), target=Reading(TARGET, NOW - 0.6))), Hold)
     resumed = step(inputs(joints=joint_reading(positions)))
     assert isinstance(resumed, Command) and resumed.target_in_base == TARGET
+
+
+def test_a_stale_target_last_seen_in_the_air_keeps_the_grip_as_it_rises():
+    """Last seen in the air, the object is carried: the fingers stay as commanded, and the rise
+    begins at once."""
+    carried = (TARGET[0], TARGET[1], ENV_CFG.object_rest_z() + 0.05)
+    _, results, heights, _ = rise_on_a_stale_target(carried)
+    assert all(r.gripper_width == pytest.approx(0.0) for r in results[:-1])
+    assert np.all(np.diff(heights) > 0) and heights[-1] == pytest.approx(carried[2] + 0.2, abs=1e-3)
 
 
 def test_without_a_rise_or_a_target_acted_on_a_stale_target_holds_at_once():

@@ -355,6 +355,29 @@ def test_fingers_opening_off_a_set_down_object_do_not_take_it_back(with_command)
         assert state.position_table[2] == pytest.approx(seen.position_table[2])
 
 
+def test_open_fingers_over_a_wide_object_are_not_on_it():
+    """Fully open over an object within grasp_width_margin of the stroke (80 mm over a 70 mm
+    cylinder), the fingers "fitted" it by their width, and told to stay where they were they were
+    not letting go: a hand rising 1 cm while it lined up took the object into the hand, and the
+    object then moved with the tcp, 15 mm off where it stood when the fingers did close (the
+    rehearsal, stop 64). Told to be open wider than the object, they are not on it; told to close,
+    they take it as before."""
+    frames = Frames()
+    seen = frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08, commanded=0.08)
+    centre, size = np.array(seen.position_table), seen.detection.size
+    open_width = size + 0.5 * frames.tracker.settings.grasp_width_margin  # "fits" by width alone
+    low = tcp_at(*(centre + [0.0, 0.0, 0.01]))
+    frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=low, width=open_width, commanded=open_width)
+    for rise in (0.012, 0.02):
+        hand = tcp_at(*(centre + [0.0, 0.0, 0.01 + rise]))
+        assert frames.tracker.hand_between_frames(frames.stamp, hand, open_width, open_width) is None
+        assert frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=hand, width=open_width, commanded=open_width,
+                      dt=0.02).state is TrackState.HIDDEN
+    # Told to close, the same fingers at the same width are on it: taken into the hand.
+    closed = frames(scene(OBJECT, GRIPPER_OVER_IT), tcp=low, width=open_width, commanded=0.0, dt=0.02)
+    assert closed.state is TrackState.IN_HAND
+
+
 def test_without_the_command_a_widened_grip_has_let_go():
     """The same widening with the command unknown (no ~gripper_command_topic): the old rule."""
     frames = Frames(release_opening=0.004)

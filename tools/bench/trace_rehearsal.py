@@ -49,8 +49,13 @@ def listener(events: List[Event], period_s: float) -> Callable[[], List[Any]]:
         from std_msgs.msg import Float64, String
         from visualization_msgs.msg import Marker
 
+        import tf2_geometry_msgs  # noqa: F401  (registers PoseStamped with tf2's transform)
+        import tf2_ros
+
         latest: dict = {}
         last_text: dict = {}
+        tf_buffer = tf2_ros.Buffer()
+        tf_listener = tf2_ros.TransformListener(tf_buffer)
 
         def changed(kind: str, text: str) -> None:
             if last_text.get(kind) != text:
@@ -73,6 +78,15 @@ def listener(events: List[Event], period_s: float) -> Callable[[], List[Any]]:
             if target is not None:
                 # The node's marker shows where the target is, not its yaw.
                 line += f" | policy's target {pose_text(target.pose, with_yaw=False)} ({target.header.frame_id})"
+            detected = latest.get("detected")
+            if detected is not None:
+                # The target's yaw as the detector gives it (its pose in the optical frame, or the
+                # tcp's while held), in the base frame: what the policy's yaw features come from.
+                try:
+                    in_base = tf_buffer.transform(detected, "base_link", rospy.Duration(0.05))
+                    line += f" yaw {pose_text(in_base.pose).split('yaw')[1].strip()}"
+                except Exception:  # tf not there yet: the yaw waits for the next line
+                    pass
             goal = latest.get("goal")
             if goal is not None:
                 line += f" | goal {pose_text(goal.pose)} ({goal.header.frame_id})"
@@ -83,13 +97,14 @@ def listener(events: List[Event], period_s: float) -> Callable[[], List[Any]]:
 
         return [rospy.Subscriber("/fr5_sim/object", Marker, keep("truth"), queue_size=1),
                 rospy.Subscriber("/fr5_policy/target_marker", Marker, keep("target"), queue_size=1),
+                rospy.Subscriber("/target_pose", PoseStamped, keep("detected"), queue_size=1),
                 rospy.Subscriber("/place_pose", PoseStamped, keep("goal"), queue_size=1),
                 rospy.Subscriber("/fr5/gripper/command", Float64, keep("gripper"), queue_size=1),
                 rospy.Subscriber("/detector/track_state", String, lambda m: changed("track", m.data), queue_size=100),
                 rospy.Subscriber("/diagnostics", DiagnosticArray, diagnostics, queue_size=100),
                 rospy.Subscriber("/fr5_sim/episode_outcome", String,
                                  lambda m: events.append((time.monotonic(), "outcome", m.data)), queue_size=100),
-                StoppableTimer(rospy.Timer(rospy.Duration(period_s), tick))]
+                StoppableTimer(rospy.Timer(rospy.Duration(period_s), tick)), tf_listener]
     return listen
 
 

@@ -246,13 +246,20 @@ class DeploymentStep:
         comes from a clock that cannot be trusted: hold.
     :param guard: the real arm's start move, ramp-in and joint-limit margin
         (:class:`~fr5_rl.motion_guard.MotionGuard`); None: none (as in training).
-    :param stale_target_rise: on a stale target, the tcp rises straight up (its rotation and the
-        gripper's command kept) until it is this far (m) above the last target the policy acted
-        on, then holds; 0: hold where it is. The arm hovering over an object hides it from the
+    :param stale_target_rise: on a stale target, the tcp rises straight up (its rotation kept)
+        until it is this far (m) above the last target the policy acted on, then holds; 0: hold
+        where it is. An object last seen standing on the table is let go of first (the fingers
+        opened for ``STALE_TARGET_OPEN_S``, the arm still); one last seen in the air stays in the
+        grip. The arm hovering over an object hides it from the
         camera, and the detector's tracker drops a track hidden for longer than its
         ``hidden_timeout``: held there, nothing would ever show it again.
     :param stale_target_rise_speed: m/s of that rise.
     """
+
+    # s the fingers open, the arm still, before it rises from an object last seen standing; m above
+    # its resting height that still counts as standing (a 1-2 cm drift of the in-hand estimate).
+    STALE_TARGET_OPEN_S = 0.4
+    STANDING_MARGIN = 0.02
 
     def __init__(self, policy: Policy, robot: RobotSpec, env_cfg: EnvConfig, joint_state_timeout: float,
                  target_timeout: float, new_target_jump: float = 0.05, target_workspace_margin: float = 0.05,
@@ -304,6 +311,9 @@ class DeploymentStep:
         self._inverse = InverseKinematics(self.kinematics) if self.stale_target_rise > 0.0 else None
         # Why the arm is rising clear of a stale target's object (None: it is not).
         self.rising: Optional[str] = None
+        self._last_rest_z = self.object_rest_z  # m: where the last target's object stands on the table
+        self._opened_for = 0  # periods the fingers have been opening before the rise
+        self._open_periods = max(1, int(round(self.STALE_TARGET_OPEN_S / self.control_dt)))
 
     def start_episode(self) -> None:
         """Start as an episode starts in training: no action-filter momentum, the gripper
@@ -365,6 +375,7 @@ class DeploymentStep:
         if age > self.target_timeout:
             return self._rise_or_hold(joints.value.positions, f"{age:.2f} s old > {self.target_timeout:g} s",
                                       inputs.now)
+        self._opened_for = 0
         if self.rising is not None:
             # The policy again, straight after a rise: as after a hold, without the rise's momentum.
             self.shaper.reset()
@@ -408,7 +419,7 @@ class DeploymentStep:
                 previous_actions=self.action_history.values(), object_features=object_block, goal=goal_block))
         except ValueError as error:
             return Hold(HoldReason.OBSERVATION_INVALID, str(error))
-        self._last_target = target_in_base
+        self._last_target, self._last_rest_z = target_in_base, object_rest_z
         started = time.perf_counter()
         action = self.policy.act(observation)
         inference = time.perf_counter() - started
@@ -429,6 +440,17 @@ class DeploymentStep:
         if self.stale_target_rise <= 0.0 or self._last_target is None:
             self.rising = None
             return Hold(HoldReason.TARGET_STALE, stale)
+        # Last seen standing on the table, the object is not carried (the tracker publishes one in
+        # the hand without the camera): the fingers let go of it where it stands, the arm still,
+        # before the arm rises. Risen with them closed, they carried a box they half held up
+        # into the air, out of the camera's sight for good (the rehearsal, stop 64). Last seen in
+        # the air, it is carried: the grip stays.
+        if float(self._last_target[2]) <= self._last_rest_z + self.STANDING_MARGIN:
+            self.gripper_command_width = self.max_opening_width
+            if self._opened_for < self._open_periods:
+                self._opened_for += 1
+                self.rising = f"target stale ({stale}): letting go of the object where it stands, then rising clear"
+                return Command(tuple(float(q) for q in measured), self.gripper_command_width, None, 0.0)
         tcp_position, tcp_rotation = self.kinematics.tcp_pose(measured)
         top = float(self._last_target[2]) + self.stale_target_rise
         climb = min(self.rise_step, top - float(tcp_position[2]))

@@ -393,7 +393,7 @@ class ObjectTracker:
             return result  # no look at where it stands: the track stays as it is
         # Closed on it before the look at where it stood: a fast lift carries it off that spot
         # within a frame, and the bare table there then means "in the hand", not "gone".
-        grasped_from = self._grasp_pose(tcp, gripper_width, stamp, letting_go)
+        grasped_from = self._grasp_pose(tcp, gripper_width, stamp, letting_go, commanded_width)
         lifted = (tcp is not None and grasped_from is not None and self._grasp_low is not None
                   and tcp[2, 3] - self._grasp_low[2, 3] >= s.lift_evidence)
         if lifted:
@@ -430,7 +430,8 @@ class ObjectTracker:
                 or gripper_width is None:
             return None
         tcp = np.asarray(table_from_tcp, dtype=np.float64)
-        if self._grasp_pose(tcp, gripper_width, stamp, self._letting_go(gripper_width, commanded_width, False)) is None \
+        if self._grasp_pose(tcp, gripper_width, stamp, self._letting_go(gripper_width, commanded_width, False),
+                            commanded_width) is None \
                 or self._grasp_low is None \
                 or tcp[2, 3] - self._grasp_low[2, 3] < self.settings.lift_evidence:
             return None
@@ -493,7 +494,7 @@ class ObjectTracker:
         return by_trend and self._last_width is not None and width - self._last_width > tolerance
 
     def _grasp_pose(self, tcp: Optional[np.ndarray], width: Optional[float], stamp: float,
-                    letting_go: bool = False) -> Optional[np.ndarray]:
+                    letting_go: bool = False, commanded: Optional[float] = None) -> Optional[np.ndarray]:
         """The tcp pose (4x4, table frame) at which the fingers came around the tracked object,
         while they stay at a width that holds it; None otherwise.
 
@@ -502,11 +503,12 @@ class ObjectTracker:
         ``grasp_radius`` from where the object stood. The pose of the last frame that had the
         fingers around it is kept until they open past, or close below, its width, the object is
         seen standing, or the track is reset; a frame without the tcp pose or the opening
-        keeps it. Fingers ``letting_go`` (:meth:`_letting_go`) are not around it: that forgets it."""
+        keeps it. Fingers ``letting_go`` (:meth:`_letting_go`) are not around it: that forgets it;
+        fingers told to open wider than the object (``commanded``, m) do not hold it."""
         if letting_go:
             self._grasp_tcp = None
             self._grasp_low = None
-        elif self._closed_on_it(tcp, width):
+        elif self._closed_on_it(tcp, width, commanded):
             self._grasp_tcp = np.array(tcp, dtype=np.float64)
             if self._grasp_low is None or tcp[2, 3] < self._grasp_low[2, 3]:
                 self._grasp_low, self._grasp_low_stamp = self._grasp_tcp, stamp
@@ -646,10 +648,18 @@ class ObjectTracker:
         return TrackedObject(tuple(track.position.tolist()), state, track.last_seen, None, in_tcp, track.yaw,
                              track.shape, orientation)
 
-    def _closed_on_it(self, tcp: Optional[np.ndarray], width: Optional[float]) -> bool:
-        """Whether the fingers, ``width`` (m) open at the tcp pose ``tcp``, hold the tracked object."""
+    def _closed_on_it(self, tcp: Optional[np.ndarray], width: Optional[float],
+                      commanded: Optional[float] = None) -> bool:
+        """Whether the fingers, ``width`` (m) open at the tcp pose ``tcp`` and last told to go to
+        ``commanded`` (m; None: unknown), hold the tracked object."""
         s = self.settings
         if tcp is None or width is None or self._track.state is TrackState.LOST:
+            return False
+        # Told to stay open wider than the object, they are not on it, whatever their width: open
+        # (80 mm) over a 70 mm cylinder "fitted" within grasp_width_margin, a hand that rose 1 cm
+        # while it lined up took it into the hand, and the object then moved with the tcp as it
+        # lined up: 15 mm off where it stood when the fingers did close (the rehearsal, stop 64).
+        if commanded is not None and commanded >= self._track.size:
             return False
         track = self._track
         # Near the object, not its centre: a tall one is grasped near its top, 4-5 cm above its
