@@ -153,11 +153,12 @@ def rise_on_a_stale_target(target, periods=300):
 
 def test_a_stale_target_lets_go_of_a_standing_object_rises_clear_holds_then_the_policy_resumes():
     """With ``stale_target_rise``, over an object last seen standing: the fingers open with the
-    arm still for STALE_TARGET_OPEN_S, then the tcp rises straight up (its rotation kept) until
+    arm still for stale_target_let_go, then the tcp rises straight up (its rotation kept) until
     it is that far above the last target, holds there, and hands back to the policy once a fresh
     target comes."""
     step, results, heights, positions = rise_on_a_stale_target(TARGET)
-    opening = int(round(DeploymentStep.STALE_TARGET_OPEN_S / DT))
+    opening = step.let_go_periods
+    assert opening == int(round(0.4 / DT))  # stale_target_let_go's default
     assert all(r.gripper_width == pytest.approx(ROBOT.max_opening_width) for r in results[:-1])
     assert np.ptp(heights[:opening]) < 1e-9 and np.all(np.diff(heights[opening:]) > 0)
     assert np.max(np.diff(heights)) <= 0.25 * DT + 1e-6

@@ -357,11 +357,12 @@ def test_fingers_opening_off_a_set_down_object_do_not_take_it_back(with_command)
 
 def test_open_fingers_over_a_wide_object_are_not_on_it():
     """Fully open over an object within grasp_width_margin of the stroke (80 mm over a 70 mm
-    cylinder), the fingers "fitted" it by their width, and told to stay where they were they were
-    not letting go: a hand rising 1 cm while it lined up took the object into the hand, and the
-    object then moved with the tcp, 15 mm off where it stood when the fingers did close (the
-    rehearsal, stop 64). Told to be open wider than the object, they are not on it; told to close,
-    they take it as before."""
+    cylinder), the fingers "fitted" it by their width, were not letting go (they were where they
+    were told to be) and, not closing, counted as stopped on it: the first frame that hid the
+    object took it into the hand (a hand rising 1 cm would too, between frames), and the object
+    then moved with the tcp, 15 mm off where it stood when the fingers did close (the rehearsal,
+    stop 64). Told to be open wider than the object, they are not on it; told to close, they take
+    it as before."""
     frames = Frames()
     seen = frames(scene(OBJECT), tcp=tcp_at(0.1, -0.05, 0.3), width=0.08, commanded=0.08)
     centre, size = np.array(seen.position_table), seen.detection.size

@@ -89,8 +89,8 @@ class ScriptedExpert:
         q = state.joint_positions
         tcp_x, tcp_y, tcp_z = state.tcp_position
         object_x, object_y, object_z = state.object_position
-        # The hand's yaw, once a step (forward kinematics), where the object's yaw matters.
-        hand_yaw = self._hand_yaw(state) if self._symmetry_order() else None
+        # The hand's yaw, once a step (forward kinematics): every phase's rotation keeps or turns it.
+        hand_yaw = self._hand_yaw(state)
         grasp = env.task.name in ("grasp", "place")
         grasp_offset = self._grasp_offset() if grasp else 0.0
         grasp_z = object_z + grasp_offset
@@ -143,8 +143,7 @@ class ScriptedExpert:
         gripper = -1.0 if phase in ("close", "lift", "carry", "lower") else 1.0
         wanted_rotation = self._rotation(state, phase, held, hand_yaw)
         if self._tcp_space:
-            current_yaw = self._hand_yaw(state) if hand_yaw is None else hand_yaw
-            return self._tcp_action(current_yaw, (target[0] - tcp_x, target[1] - tcp_y, target[2] - tcp_z),
+            return self._tcp_action(hand_yaw, (target[0] - tcp_x, target[1] - tcp_y, target[2] - tcp_z),
                                     wanted_rotation, gripper)
         joint_targets = self._inverse_kinematics(target, q, wanted_rotation)
         max_step = self._max_step
@@ -312,20 +311,19 @@ class ScriptedExpert:
         joints, _ = self._inverse.solve(start, tcp_target, self._down_rotation if rotation is None else rotation)
         return joints
 
-    def _rotation(self, state, phase: str, held: bool, tcp_yaw: Optional[float]) -> Sequence[float]:
+    def _rotation(self, state, phase: str, held: bool, tcp_yaw: float) -> Sequence[float]:
         """The tcp rotation to aim for: pointing down, turned about the vertical so the fingers
         close across a box's narrower side (its own x along the gripper's x), and, carrying it
         in the place task, so that the box stands at the goal's yaw. A cylinder needs no turn:
         the hand keeps its yaw, as it does letting go and rising clear.
 
-        :param tcp_yaw: the tcp's yaw now (rad; :meth:`_hand_yaw`), None for a cylinder."""
+        :param tcp_yaw: the tcp's yaw now (rad; :meth:`_hand_yaw`)."""
         order = self._symmetry_order()
         home_yaw = math.atan2(self._down_rotation[3], self._down_rotation[0])
         if phase in ("release", "retreat") or order == 0:
             # Letting go and rising clear, and whatever the phase for a cylinder (its yaw does not
             # matter): keep the hand's yaw. Turned back to home's, a learner had to read home's
             # yaw off the joints, and it turned the hand to and fro over a cylinder it descended on.
-            tcp_yaw = self._hand_yaw(state) if tcp_yaw is None else tcp_yaw
             wanted = tcp_yaw
         elif held and self.env.task.name == "place" and phase in ("carry", "lower"):
             # The object turns with the hand: turn the hand by the object's yaw error to the goal.

@@ -169,7 +169,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                           target_workspace_margin=node.target_workspace_margin,
                           future_stamp_tolerance=node.future_stamp_tolerance,
                           guard=guard if chain.episode_start == "go_to_start" else None,
-                          stale_target_rise=node.stale_target_rise, stale_target_rise_speed=node.stale_target_rise_speed)
+                          stale_target_rise=node.stale_target_rise, stale_target_rise_speed=node.stale_target_rise_speed,
+                          stale_target_let_go=node.stale_target_let_go)
     fresh_state_wait_s = (node.fresh_state_wait if args.fresh_state_wait_ms is None
                           else args.fresh_state_wait_ms / 1000.0)
     fresh_state_max_age_s = (node.fresh_state_max_age if args.fresh_state_max_age_ms is None

@@ -249,22 +249,24 @@ class DeploymentStep:
     :param stale_target_rise: on a stale target, the tcp rises straight up (its rotation kept)
         until it is this far (m) above the last target the policy acted on, then holds; 0: hold
         where it is. An object last seen standing on the table is let go of first (the fingers
-        opened for ``STALE_TARGET_OPEN_S``, the arm still); one last seen in the air stays in the
-        grip. The arm hovering over an object hides it from the
-        camera, and the detector's tracker drops a track hidden for longer than its
-        ``hidden_timeout``: held there, nothing would ever show it again.
+        opened for ``stale_target_let_go``, the arm still); one last seen in the air stays in the
+        grip. The arm hovering over an object hides it from the camera, and the detector's
+        tracker drops a track hidden for longer than its ``hidden_timeout``: held there, nothing
+        would ever show it again.
     :param stale_target_rise_speed: m/s of that rise.
+    :param stale_target_let_go: s the fingers open, the arm still, before the rise from an object
+        last seen standing.
     """
 
-    # s the fingers open, the arm still, before it rises from an object last seen standing; m above
-    # its resting height that still counts as standing (a 1-2 cm drift of the in-hand estimate).
-    STALE_TARGET_OPEN_S = 0.4
+    # m above its resting height at which an object last seen still counts as standing: the
+    # in-hand estimate of one just set down drifts by 1-2 cm.
     STANDING_MARGIN = 0.02
 
     def __init__(self, policy: Policy, robot: RobotSpec, env_cfg: EnvConfig, joint_state_timeout: float,
                  target_timeout: float, new_target_jump: float = 0.05, target_workspace_margin: float = 0.05,
                  future_stamp_tolerance: float = 0.05, guard: Optional[MotionGuardSettings] = None,
-                 stale_target_rise: float = 0.0, stale_target_rise_speed: float = 0.1) -> None:
+                 stale_target_rise: float = 0.0, stale_target_rise_speed: float = 0.1,
+                 stale_target_let_go: float = 0.4) -> None:
         self.policy = policy
         self.control_dt = env_cfg.simulation.control_dt
         self.kinematics = ForwardKinematics(robot)
@@ -303,9 +305,9 @@ class DeploymentStep:
         self.gripper_command_width = robot.max_opening_width
         self.last_hold: Optional[Hold] = Hold(HoldReason.NO_JOINT_STATE, "starting")
         self._last_target: Optional[np.ndarray] = None
-        if stale_target_rise < 0.0 or stale_target_rise_speed <= 0.0:
-            raise ValueError(f"stale_target_rise must be >= 0 m and its speed > 0 m/s, got {stale_target_rise} m "
-                             f"at {stale_target_rise_speed} m/s")
+        if stale_target_rise < 0.0 or stale_target_rise_speed <= 0.0 or stale_target_let_go < 0.0:
+            raise ValueError(f"stale_target_rise must be >= 0 m, its speed > 0 m/s and the let-go >= 0 s, got "
+                             f"{stale_target_rise} m at {stale_target_rise_speed} m/s after {stale_target_let_go} s")
         self.stale_target_rise = float(stale_target_rise)
         self.rise_step = float(stale_target_rise_speed) * self.control_dt
         self._inverse = InverseKinematics(self.kinematics) if self.stale_target_rise > 0.0 else None
@@ -313,7 +315,7 @@ class DeploymentStep:
         self.rising: Optional[str] = None
         self._last_rest_z = self.object_rest_z  # m: where the last target's object stands on the table
         self._opened_for = 0  # periods the fingers have been opening before the rise
-        self._open_periods = max(1, int(round(self.STALE_TARGET_OPEN_S / self.control_dt)))
+        self.let_go_periods = int(round(stale_target_let_go / self.control_dt))
 
     def start_episode(self) -> None:
         """Start as an episode starts in training: no action-filter momentum, the gripper
@@ -447,27 +449,32 @@ class DeploymentStep:
         # the air, it is carried: the grip stays.
         if float(self._last_target[2]) <= self._last_rest_z + self.STANDING_MARGIN:
             self.gripper_command_width = self.max_opening_width
-            if self._opened_for < self._open_periods:
-                self._opened_for += 1
-                self.rising = f"target stale ({stale}): letting go of the object where it stands, then rising clear"
-                return Command(tuple(float(q) for q in measured), self.gripper_command_width, None, 0.0)
-        tcp_position, tcp_rotation = self.kinematics.tcp_pose(measured)
-        top = float(self._last_target[2]) + self.stale_target_rise
-        climb = min(self.rise_step, top - float(tcp_position[2]))
-        if climb <= 1e-4:
-            self.rising = None
-            return Hold(HoldReason.TARGET_STALE, f"{stale}; risen {self.stale_target_rise:g} m above where the object "
-                                                 "was last seen, waiting for the camera to find it")
-        wanted = np.asarray(tcp_position, dtype=np.float64) + np.array([0.0, 0.0, climb])
-        targets, _ = self._inverse.solve(measured, wanted.tolist(), np.asarray(tcp_rotation).ravel().tolist())
-        targets = np.asarray(targets, dtype=np.float64)
+            letting_go = self._opened_for < self.let_go_periods
+        else:
+            letting_go = False
+        if letting_go:
+            self._opened_for += 1
+            targets = np.asarray(measured, dtype=np.float64)
+            why = "letting go of the object where it stands, then rising clear"
+        else:
+            tcp_position, tcp_rotation = self.kinematics.tcp_pose(measured)
+            climb = min(self.rise_step, float(self._last_target[2]) + self.stale_target_rise - float(tcp_position[2]))
+            if climb <= 1e-4:
+                self.rising = None
+                return Hold(HoldReason.TARGET_STALE, f"{stale}; risen {self.stale_target_rise:g} m above where the "
+                                                     "object was last seen, waiting for the camera to find it")
+            wanted = np.asarray(tcp_position, dtype=np.float64) + np.array([0.0, 0.0, climb])
+            targets, _ = self._inverse.solve(measured, wanted.tolist(), np.asarray(tcp_rotation).ravel().tolist())
+            targets = np.asarray(targets, dtype=np.float64)
+            why = "rising clear of where the object was last seen, so that the camera sees it"
+        # Through the guard and the gate as every command is.
         if self.guard is not None:
             targets = self.guard.limit(targets, measured, now)
         problem = self.gate.check(targets, measured)
         if problem is not None:
             self.rising = None
             return Hold(HoldReason.TARGET_STALE, f"{stale}; cannot rise clear: {problem}")
-        self.rising = f"target stale ({stale}): rising clear of where the object was last seen, so that the camera sees it"
+        self.rising = f"target stale ({stale}): {why}"
         return Command(tuple(targets.tolist()), self.gripper_command_width, None, 0.0)
 
     def _object_and_goal(self, inputs: StepInputs, target_pose: np.ndarray, tcp_rotation: np.ndarray):

@@ -24,6 +24,7 @@ class PolicyNodeParams:
     target_timeout: float
     stale_target_rise: float  # m above the last target the tcp rises to on a stale target; 0: hold in place
     stale_target_rise_speed: float  # m/s
+    stale_target_let_go: float  # s the fingers open, the arm still, before rising from an object last seen standing
     future_stamp_tolerance: float
     target_workspace_margin: float
     joint_states_topic: str
@@ -68,6 +69,8 @@ class PolicyNodeParams:
         check_positive(source, rate=self.rate, joint_state_timeout=self.joint_state_timeout,
                        target_timeout=self.target_timeout, start_move_timeout=self.start_move_timeout,
                        stale_target_rise_speed=self.stale_target_rise_speed)
+        if self.stale_target_let_go < 0.0:
+            raise ConfigError(f"{source}: 'stale_target_let_go' must be >= 0 s, got {self.stale_target_let_go}")
 
 
 def load_policy_node_params(overrides: Optional[Mapping[str, Any]] = None) -> PolicyNodeParams:

@@ -656,9 +656,10 @@ class ObjectTracker:
         if tcp is None or width is None or self._track.state is TrackState.LOST:
             return False
         # Told to stay open wider than the object, they are not on it, whatever their width: open
-        # (80 mm) over a 70 mm cylinder "fitted" within grasp_width_margin, a hand that rose 1 cm
-        # while it lined up took it into the hand, and the object then moved with the tcp as it
-        # lined up: 15 mm off where it stood when the fingers did close (the rehearsal, stop 64).
+        # (80 mm) over a 70 mm cylinder they "fitted" within grasp_width_margin and, not closing,
+        # counted as stopped on it; the first hidden frame took it into the hand, and the object
+        # then moved with the tcp as it lined up: 15 mm off where it stood when the fingers did
+        # close (the rehearsal, stop 64).
         if commanded is not None and commanded >= self._track.size:
             return False
         track = self._track

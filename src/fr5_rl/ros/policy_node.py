@@ -87,7 +87,8 @@ class PolicyNode:
                                    future_stamp_tolerance=params.future_stamp_tolerance,
                                    guard=params.guard if params.motion_guard else None,
                                    stale_target_rise=params.stale_target_rise,
-                                   stale_target_rise_speed=params.stale_target_rise_speed)
+                                   stale_target_rise_speed=params.stale_target_rise_speed,
+                                   stale_target_let_go=params.stale_target_let_go)
         self.control_dt = self.step.control_dt
         if abs(params.rate * self.control_dt - 1.0) > 1e-6:
             raise ConfigError(f"~rate = {params.rate:g} Hz but the model was trained at {1.0 / self.control_dt:g} Hz: "
