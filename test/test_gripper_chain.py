@@ -142,3 +142,74 @@ def test_in_guard_episodes_the_velocity_limit_ramps_in_from_the_start():
 def test_a_guard_share_outside_zero_to_one_is_refused():
     with pytest.raises(ConfigError, match="guard_share"):
         FR5Env(task="grasp", config={"randomisation": {**PERTURBED, "guard_share": -0.1}})
+
+
+def stream_read_back_ages(link, steps: int = 100) -> list:
+    """A policy's stream of widths, each past the deadband from the last, every 20 ms, behind
+    ``link`` (a chain or the environment's model of it) reset with the rehearsal's 0.1 s transient:
+    the age (s) of the newest accepted read-back at each step, and the moves made."""
+    link.reset(MAX_WIDTH, call_phase=0.0, read_phase=0.0, zero_transient=0.1)
+    seen, sent = [], []
+    for k in range(steps):
+        t = 0.02 * k
+        sent.append(link.command(0.04 + 0.01 * (-1) ** k, t))  # 30 and 50 mm in turn
+        # Fingers that open a whole percent every step, so that a read-back tells which step it saw.
+        seen.append(width_to_percent(link.observe(k * MAX_WIDTH / 100.0, t), MAX_WIDTH))
+    # A read-back's age: since the step whose fingers it shows (the start's open width: none yet).
+    ages = [0.02 * (k - percent) if percent <= k else 0.02 * k for k, percent in enumerate(seen)]
+    moves = sum(1 for a, b in zip(sent, sent[1:]) if a != b)
+    return ages, moves
+
+
+def chain_with(readback_max_age: float) -> EmulatedGripperChain:
+    import dataclasses
+
+    from fr5_rl.sim.gripper_chain import load_gripper_chain_settings
+
+    bridge, emulator = load_gripper_chain_settings()
+    return EmulatedGripperChain(dataclasses.replace(bridge, readback_max_age=readback_max_age), emulator, MAX_WIDTH)
+
+
+def test_a_stream_of_moves_no_longer_blinds_the_read_back():
+    # Before readback_max_age, a width that moved past the deadband every call period kept every
+    # read inside the controller's 0 after a move: the read-back stood still for the whole stream
+    # (the rehearsal's place timeouts, stop 65). Now a move waits for a read past the transient.
+    params = load_yaml("gripper_bridge")
+    assert params["readback_max_age"] > 0
+    blind, _ = stream_read_back_ages(chain_with(0.0))
+    assert max(blind) > 1.5  # the old scheduling: nothing read for the whole stream
+    ages, moves = stream_read_back_ages(chain_with(params["readback_max_age"]))
+    bound = params["readback_max_age"] + 0.1 + params["readback_retry"] + 0.02  # + transient + a retry + a step
+    assert max(ages[10:]) <= bound, max(ages)
+    assert moves >= 12  # of 20 call slots in 2 s: the stream still goes out
+
+
+def test_the_environments_model_of_the_bridge_keeps_the_read_back_as_fresh_as_the_chain():
+    from fr5_rl.gripper import load_bridge_timing
+
+    model_ages, model_moves = stream_read_back_ages(BridgedGripper(load_bridge_timing(), MAX_WIDTH))
+    chain_ages, chain_moves = stream_read_back_ages(EmulatedGripperChain.from_config(MAX_WIDTH))
+    # The model reads on a fixed grid, the bridge a read period after its last read: the same
+    # bound on the read-back's age (within a step), about as many moves.
+    assert max(model_ages[10:]) == pytest.approx(max(chain_ages[10:]), abs=0.021)
+    assert model_moves == pytest.approx(chain_moves, rel=0.3)
+
+
+def test_moves_do_not_wait_on_a_read_back_the_controller_refuses():
+    # An SDK without GetGripperCurPosition refuses every read: a stale read-back must not hold
+    # the moves back for ever.
+    from fr5_rl.drivers.fr5_xmlrpc import ControllerRefused
+
+    chain = EmulatedGripperChain.from_config(MAX_WIDTH)
+    chain.reset(MAX_WIDTH, call_phase=0.0, read_phase=0.0, zero_transient=0.1)
+    answer = chain.bridge.client.call
+
+    def refuse_reads(call):
+        if call.method == "GetGripperCurPosition":
+            raise ControllerRefused(f"{call}: no such method on this SDK")
+        return answer(call)
+
+    chain.bridge.client.call = refuse_reads
+    sent = [chain.command(0.04 + 0.01 * (-1) ** k, 0.02 * k) for k in range(100)]
+    moves = sum(1 for a, b in zip(sent, sent[1:]) if a != b)
+    assert moves >= 18  # every call slot of 2 s

@@ -326,3 +326,28 @@ def test_the_environment_holds_the_yaw_with_the_position_while_the_hand_hides_th
             env.close()
     assert turned[0.0] > 0.2  # followed the turn (sin, cos of k times 0.3 rad and then some)
     assert turned[10.0] < 0.01, turned  # held at the yaw last seen
+
+
+def test_the_trackers_grasp_is_judged_by_the_bridges_read_back():
+    """The detector's tracker hears the fingers through the bridge's read-back (the finger joint
+    states the bridge publishes), not from the fingers themselves. The environment's model of it
+    judged by the true opening: behind the chain a read-back that lagged a grasp left the object
+    on the table for the tracker while the environment had it in the hand (stop 65)."""
+    env = FR5Env(task="grasp", config={"randomisation": {**PERTURBED, "gripper_bridge_share": 1.0,
+                                                         "target_share": 1.0}})
+    try:
+        env.reset(seed=5)
+        judged = []
+        judge = env.episode.held_as_the_camera_sees
+        env.episode.held_as_the_camera_sees = lambda state: judged.append(state.gripper_width) or judge(state)
+        close = np.zeros(7)
+        close[6] = -1.0
+        read_back, fingers = [], []
+        for _ in range(20):
+            env.step(close)
+            read_back.append(env.episode.chain.bridge.read_width)
+            fingers.append(sum(env.episode.joint_states().positions[6:]))
+        assert judged == pytest.approx(read_back)
+        assert max(abs(np.asarray(read_back) - np.asarray(fingers))) > 0.005  # the two differed while closing
+    finally:
+        env.close()

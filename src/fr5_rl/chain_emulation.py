@@ -7,6 +7,7 @@ episodes; the bench's docstring says what is emulated and how it compares with R
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from dataclasses import dataclass
 from typing import Any, Dict, List, Mapping, Optional, Sequence
@@ -306,6 +307,11 @@ class ChainEmulation:
         if camera is None:
             return Reading((*pose.position, yaw), now, stamp=now)
         state = self.sim.task_state()
+        if self.bridge is not None and self.bridge.measured is not None:
+            # The detector's tracker judges the fingers by the bridge's read-back (the finger joint
+            # states it publishes), not by the fingers themselves: a read-back that lags a grasp
+            # leaves the object on the table for the tracker (the rehearsal's place timeouts, stop 65).
+            state = dataclasses.replace(state, gripper_width=self.bridge.measured.width)
         held = self.sim.held_as_the_camera_sees(state)
         around = held or self.sim.fingers_around_as_the_camera_sees(state)
         tcp = self.sim.tcp_pose() if around else None

@@ -145,9 +145,16 @@ class Episode:
                                              self.object_start, self._workspace)
         chain = self.chain
         reading, age, tcp_axis = (early[0], early[1], None) if early is not None else (measured, 0.0, state.tcp_approach_axis)
-        held = chain.sees_through_camera and self.held_as_the_camera_sees(state)
+        # The detector's tracker judges the fingers by the gripper bridge's read-back, as the
+        # policy does, where a bridge stands in between: not by the fingers themselves (a
+        # read-back that lags a grasp leaves the object on the table for the tracker).
+        tracked = state
+        if chain.sees_through_camera and chain.bridge is not None:
+            read_back = chain.bridge.observe(reading.gripper_width, now - age)  # sense() then reads the same
+            tracked = dataclasses.replace(state, gripper_width=read_back)
+        held = chain.sees_through_camera and self.held_as_the_camera_sees(tracked)
         around = held or (chain.sees_through_camera and self.cfg.randomisation.target_in_hand_from_grasp
-                          and self.fingers_around_as_the_camera_sees(state))
+                          and self.fingers_around_as_the_camera_sees(tracked))
         builder = self.observation_builder
         object_yaw = yaw_of(state.object_quaternion) if builder.object_features or builder.include_goal else 0.0
         sensed = chain.sense(reading, tcp_axis, state.object_position, state.tcp_to_object_distance, held,

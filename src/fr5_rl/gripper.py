@@ -64,12 +64,17 @@ class BridgeTiming:
     :param zero_debounce: s after a ``MoveGripper`` in which the bridge drops a read-back of 0 %
         (the controller reads 0 for a moment after a move): a read that falls in the controller's
         transient is lost, and the policy keeps seeing the older one.
+    :param read_max_age: s: a read-back older than this holds the next move until a read lands
+        past the transient (``readback_max_age``; 0: off).
+    :param read_retry: s between two reads while a move waits on one (``readback_retry``).
     """
 
     call_period: float
     read_period: float
     deadband_percent: int
     zero_debounce: float
+    read_max_age: float = 0.0
+    read_retry: float = 0.0
 
 
 class BridgedGripper:
@@ -79,8 +84,10 @@ class BridgedGripper:
     end stops always), and at most once per ``call_period``; the fingers carry out the last one
     sent. Observation: the opening read back every ``read_period`` in whole percent, held in
     between; a read within the controller's zero transient after a move reads 0 and is dropped,
-    as the bridge drops it (:func:`fr5_rl.drivers.gripper_decisions.transient_zero`). Both clocks
-    start at a random phase and the transient is drawn per episode (:meth:`reset`).
+    as the bridge drops it (:func:`fr5_rl.drivers.gripper_decisions.transient_zero`). A read-back
+    older than ``read_max_age`` holds a move until a read gets through, reads then coming every
+    ``read_retry``, as the bridge schedules them. Both clocks start at a random phase and the
+    transient is drawn per episode (:meth:`reset`).
 
     :param timing: the bridge's rates and deadband.
     :param max_width: the gripper's largest opening (m), = 100 %.
@@ -91,6 +98,9 @@ class BridgedGripper:
         self.sent: Optional[int] = None
         self.next_call = self.next_read = 0.0
         self.read_width = max_width
+        self.read_at = 0.0  # s: when the newest accepted read-back was taken
+        self.last_read_try: Optional[float] = None  # s: the newest read, accepted or lost
+        self.move_waiting = False  # a move waits on a fresh read-back
         self.last_move_at: Optional[float] = None
         self.zero_transient = 0.0
 
@@ -105,24 +115,37 @@ class BridgedGripper:
         self.sent = width_to_percent(width, self.max_width)
         self.read_width = percent_to_width(self.sent, self.max_width)
         self.next_call, self.next_read = call_phase, read_phase
+        self.read_at, self.last_read_try, self.move_waiting = 0.0, None, False
         self.last_move_at, self.zero_transient = None, min(zero_transient, self.timing.zero_debounce)
+
+    def _stale(self, now: float) -> bool:
+        """Whether the newest read-back is older than ``read_max_age`` at ``now`` (s)."""
+        return self.timing.read_max_age > 0 and now - self.read_at > self.timing.read_max_age
 
     def command(self, width: float, now: float) -> float:
         """The width (m) the fingers are told to take at ``now`` (s) when ``width`` is wanted."""
         wanted = width_to_percent(min(self.max_width, max(0.0, width)), self.max_width)
+        self.move_waiting = False
         if now >= self.next_call and needs_move(wanted, self.sent, self.timing.deadband_percent):
-            self.sent = wanted
-            self.next_call = now + self.timing.call_period
-            self.last_move_at = now
+            if self._stale(now):
+                self.move_waiting = True  # the read goes first
+            else:
+                self.sent = wanted
+                self.next_call = now + self.timing.call_period
+                self.last_move_at = now
         return percent_to_width(self.sent, self.max_width)
 
     def observe(self, measured_width: float, now: float) -> float:
         """The opening (m) the policy sees at ``now`` (s): the newest read-back of the fingers."""
-        if now >= self.next_read:
+        retry = (self.move_waiting and self.last_read_try is not None
+                 and now >= self.last_read_try + min(self.timing.read_retry, self.timing.read_period))
+        if now >= self.next_read or retry:
+            self.last_read_try = now
             in_transient = self.last_move_at is not None and now - self.last_move_at < self.zero_transient
             if not in_transient:
                 self.read_width = percent_to_width(width_to_percent(min(self.max_width, max(0.0, measured_width)),
                                                                     self.max_width), self.max_width)
+                self.read_at = now
             while self.next_read <= now:
                 self.next_read += self.timing.read_period
         return self.read_width
@@ -140,4 +163,5 @@ def load_bridge_timing(config_name: str = "gripper_bridge") -> BridgeTiming:
     if call_rate <= 0 or read_rate <= 0:
         raise ConfigError(f"config/{config_name}.yaml: max_call_rate ({call_rate:g}) and readback_rate ({read_rate:g}) "
                           "must be positive for the environment to model the bridge")
-    return BridgeTiming(1.0 / call_rate, 1.0 / read_rate, int(params["deadband_percent"]), float(params["zero_debounce"]))
+    return BridgeTiming(1.0 / call_rate, 1.0 / read_rate, int(params["deadband_percent"]), float(params["zero_debounce"]),
+                        float(params["readback_max_age"]), float(params["readback_retry"]))

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, Callable, List, Optional, Tuple
 
 from benchlib import REPO
+from fr5_rl.config import load_yaml
 from fr5_rl.deploy.bundle import read_meta
 from fr5_rl.objects import yaw_of
 from roslaunch_run import run_launch
@@ -46,6 +47,8 @@ def listener(events: List[Event], period_s: float) -> Callable[[], List[Any]]:
         import rospy
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import PoseStamped
+        from sensor_msgs.msg import JointState
+        from shape_msgs.msg import SolidPrimitive
         from std_msgs.msg import Float64, String
         from visualization_msgs.msg import Marker
 
@@ -53,6 +56,7 @@ def listener(events: List[Event], period_s: float) -> Callable[[], List[Any]]:
         import tf2_ros
 
         latest: dict = {}
+        finger_names = tuple(load_yaml("gripper")["joint_names"])
         last_text: dict = {}
         tf_buffer = tf2_ros.Buffer()
         tf_listener = tf2_ros.TransformListener(tf_buffer)
@@ -69,11 +73,20 @@ def listener(events: List[Event], period_s: float) -> Callable[[], List[Any]]:
         def keep(key: str) -> Callable[[Any], None]:
             return lambda message: latest.__setitem__(key, message)
 
+        def fingers(message) -> None:
+            # The opening is the sum of the finger joints (config/gripper.yaml).
+            by_name = dict(zip(message.name, message.position))
+            if all(name in by_name for name in finger_names):
+                latest["fingers"] = sum(by_name[name] for name in finger_names)
+
         def tick(_event) -> None:
             truth = latest.get("truth")
             if truth is None:
                 return
             line = f"truth {pose_text(truth.pose)}"
+            changed("sizes", "object {:.1f} x {:.1f} x {:.1f} mm (truth) | detected {}".format(
+                *(1000 * v for v in (truth.scale.x, truth.scale.y, truth.scale.z)),
+                " x ".join(f"{1000 * v:.1f}" for v in latest["shape"].dimensions) if "shape" in latest else "-"))
             target = latest.get("target")
             if target is not None:
                 # The node's marker shows where the target is, not its yaw.
@@ -93,6 +106,17 @@ def listener(events: List[Event], period_s: float) -> Callable[[], List[Any]]:
             gripper = latest.get("gripper")
             if gripper is not None:
                 line += f" | gripper command {gripper.data * 1000:.1f} mm"
+            fingers = latest.get("fingers")
+            if fingers is not None:
+                line += f" measured {fingers * 1000:.1f} mm"
+            try:
+                # The tcp beside the object: how far the hand is from what it is to take.
+                tcp = tf_buffer.lookup_transform("base_link", "tcp", rospy.Time(0), rospy.Duration(0.05)).transform
+                at = truth.pose.position
+                offset = (tcp.translation.x - at.x, tcp.translation.y - at.y, tcp.translation.z - at.z)
+                line += " | tcp - object {:+.3f} {:+.3f} {:+.3f}".format(*offset)
+            except Exception:  # tf not there yet
+                pass
             events.append((time.monotonic(), "poses", line))
 
         return [rospy.Subscriber("/fr5_sim/object", Marker, keep("truth"), queue_size=1),
@@ -100,6 +124,9 @@ def listener(events: List[Event], period_s: float) -> Callable[[], List[Any]]:
                 rospy.Subscriber("/target_pose", PoseStamped, keep("detected"), queue_size=1),
                 rospy.Subscriber("/place_pose", PoseStamped, keep("goal"), queue_size=1),
                 rospy.Subscriber("/fr5/gripper/command", Float64, keep("gripper"), queue_size=1),
+                rospy.Subscriber("/target_shape", SolidPrimitive, keep("shape"), queue_size=1),
+                rospy.Subscriber("/fr5/gripper/joint_states", JointState, fingers, queue_size=10),
+                rospy.Subscriber("/joint_states", JointState, fingers, queue_size=10),
                 rospy.Subscriber("/detector/track_state", String, lambda m: changed("track", m.data), queue_size=100),
                 rospy.Subscriber("/diagnostics", DiagnosticArray, diagnostics, queue_size=100),
                 rospy.Subscriber("/fr5_sim/episode_outcome", String,

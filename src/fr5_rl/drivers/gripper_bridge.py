@@ -19,6 +19,11 @@ a stream of opening widths (m) into those calls:
   (outside the command rate limit); the controller's transient 0 right after a ``MoveGripper`` is
   ignored for ``zero_debounce`` s, and each accepted reading goes to ``on_reading`` as a
   :class:`GripperReading` (width in m);
+- a read-back older than ``readback_max_age`` holds the next ``MoveGripper`` until a read lands
+  past the transient (one lost to it is tried again ``readback_retry`` later): a policy that
+  streams a slightly different width every call period would otherwise keep every read inside
+  the transient, and the opening it observes, and the detector's tracker uses, would stand still
+  for as long as the stream lasts (the rehearsal's place timeouts, stop 65);
 - ``on_fault`` hears whenever "the gripper cannot act on a width now" changes: the controller is
   unreachable (or not heard yet) or reports a gripper fault, or, in position mode, the gripper is
   not activated or its activation has not settled (``activation_settle``). A policy that holds on
@@ -170,6 +175,7 @@ class GripperBridge:
         self.last_move_at: Optional[float] = None  # when the latest MoveGripper was sent
         self.last_read_at: Optional[float] = None
         self.measured: Optional[GripperReading] = None
+        self.read_refused = False  # the newest read-back was refused (e.g. an SDK without it)
         self.readings = self.ignored_zeros = 0
         self.stopping = False
         self.thread: Optional[threading.Thread] = None
@@ -334,16 +340,33 @@ class GripperBridge:
             return self.retry_at
         return max(self.retry_at, self.last_read_at + 1.0 / rate)
 
+    def _reading_stale(self, now: float) -> bool:
+        """Whether the newest accepted read-back is older than ``readback_max_age`` (s) while
+        read-backs work: then a move waits for a fresh one (:meth:`_next_step`). Never before the
+        first accepted reading, nor while the controller refuses the read: a move must not wait on
+        a read that cannot come.
+
+        :param now: the clock's time (s).
+        """
+        max_age = self.params.readback_max_age
+        return (max_age > 0 and self.measured is not None and not self.read_refused
+                and now - self.measured.stamp > max_age)
+
     def _next_step(self, now: float) -> Tuple[Optional[str], float]:
         """What to send next and when: (kind, due time) or (None, 0) when idle for good.
 
-        A command wins over a read due at the same time.
+        A command wins over a read due at the same time, except a move while the read-back is
+        stale (:meth:`_reading_stale`): the read goes first.
 
         :param now: the clock's time (s).
         """
         earliest = max(self.not_before, self.retry_at)
         command, command_due = self._command_step(earliest)
         read_due = self._read_due()
+        if command == "move" and read_due is not None and self._reading_stale(now):
+            # The move waits on a fresh read: try soon, not a whole read period after the last.
+            retry = min(self.params.readback_retry, 1.0 / self.params.readback_rate)
+            return "read", min(read_due, max(self.retry_at, (self.last_read_at or 0.0) + retry))
         if command is not None and (read_due is None or command_due <= read_due):
             return command, command_due
         if read_due is not None:
@@ -440,6 +463,7 @@ class GripperBridge:
         """
         fault, percent = reading
         self.gripper_fault = fault
+        self.read_refused = False
         if transient_zero(percent, stamp, self.last_move_at, self.params.zero_debounce):
             self.ignored_zeros += 1
             return None
@@ -500,7 +524,9 @@ class GripperBridge:
         self._answered(now)
         if step == "read":
             # The controller is there; e.g. an SDK older than 2.1.2 lacks GetGripperCurPosition.
-            # Reads go on at their own rate, without backoff; the log is throttled.
+            # Reads go on at their own rate, without backoff, and no move waits on them; the log
+            # is throttled.
+            self.read_refused = True
             self.log("warn", "read", f"gripper bridge: read-back refused: {error} (readback_rate: 0 turns it off)")
             return
         if step == "probe":

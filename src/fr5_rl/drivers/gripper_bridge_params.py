@@ -35,6 +35,8 @@ class GripperBridgeParams:
     reactivate_after_reconnect: bool
     readback_rate: float
     zero_debounce: float
+    readback_max_age: float
+    readback_retry: float
     binary_threshold: float
     binary_hysteresis: float
     max_call_rate: float
@@ -72,9 +74,13 @@ class GripperBridgeParams:
         if self.retry_max < self.retry_initial:
             raise ConfigError(f"{source}: 'retry_max' ({self.retry_max}) must be >= 'retry_initial' ({self.retry_initial})")
         for name in ("activation_settle", "reset_settle", "binary_hysteresis", "probe_period", "error_log_period",
-                     "readback_rate", "zero_debounce"):
+                     "readback_rate", "zero_debounce", "readback_max_age", "readback_retry"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{source}: '{name}' must be >= 0, got {getattr(self, name)}")
+        if self.readback_max_age > 0 and not self.readback_retry > 0:
+            raise ConfigError(f"{source}: 'readback_retry' must be positive while 'readback_max_age' is on "
+                              f"({self.readback_max_age:g} s), got {self.readback_retry:g}: a read-back lost to the "
+                              "controller's transient 0 would otherwise never be tried again before a move")
 
 
 # ---------------------------------------------------------------------------------------------

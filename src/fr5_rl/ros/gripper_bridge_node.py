@@ -9,9 +9,11 @@ the controller is unreachable or returns error codes. The subscriber callback ne
 the network.
 
 In position mode the bridge reads the fingers back (``GetGripperCurPosition``, SDK >= 2.1.2) at
-``~readback_rate``, ignores the controller's transient 0 right after a move (``~zero_debounce``)
-and publishes ``~joint_states_topic`` (sensor_msgs/JointState: the two finger joints of
-config/gripper.yaml, each at width / 2, no velocities, stamped at the read). ``~fault_topic``
+``~readback_rate``, ignores the controller's transient 0 right after a move (``~zero_debounce``),
+holds a move while the newest reading is older than ``~readback_max_age`` (a stream of moves
+would otherwise keep every read inside that transient) and publishes ``~joint_states_topic``
+(sensor_msgs/JointState: the two finger joints of config/gripper.yaml, each at width / 2, no
+velocities, stamped at the read). ``~fault_topic``
 (std_msgs/Bool, latched) is true while the gripper cannot act on a width: the controller is
 unreachable (or not yet heard) or reports a gripper fault, or (position mode) the gripper is
 not yet activated or its activation has not settled (``~activation_settle``). The policy node

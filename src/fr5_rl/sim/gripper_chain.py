@@ -94,7 +94,8 @@ class EmulatedGripperChain:
                              "a policy cannot observe the opening otherwise")
         self.max_width = max_width
         self.timing = BridgeTiming(1.0 / bridge_params.max_call_rate, 1.0 / bridge_params.readback_rate,
-                                   int(bridge_params.deadband_percent), float(bridge_params.zero_debounce))
+                                   int(bridge_params.deadband_percent), float(bridge_params.zero_debounce),
+                                   float(bridge_params.readback_max_age), float(bridge_params.readback_retry))
         self.clock = ChainClock()
         self._settings = emulator_settings
         self.emulator = ControllerEmulator(emulator_settings, 0, self.clock)  # never started: no socket
