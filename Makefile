@@ -64,9 +64,11 @@ bench-grasp: setup
 	@$(ENV) python tools/bench/env_and_inference.py --skip-env --model models/grasp --results bench/results/grasp
 
 # Vision in the loop: renderer speed, detection error (200 placements), camera and loop rates,
-# image-to-command latency, reach and grasp through the simulated camera (~10 min).
+# image-to-command latency, reach and grasp through the simulated camera (~10 min); then every
+# object of 80 scenes of several (~1 min).
 bench-vision: setup
 	@$(ENV) python tools/bench/vision.py $(BENCH_ARGS)
+	@$(ENV) python tools/bench/scene_detection.py --scenes 80 --seed 5430000
 
 train: setup
 	@$(ENV) rosrun fr5_rl train.py --task $(TASK) --algo $(ALGO) --robot $(ROBOT)

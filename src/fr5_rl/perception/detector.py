@@ -27,6 +27,7 @@ no defaults in code); the table and the placement region are ``config/env.yaml``
 from __future__ import annotations
 
 import cmath
+import dataclasses
 import enum
 import math
 from dataclasses import dataclass
@@ -66,6 +67,8 @@ class RefusalReason(enum.Enum):
     NO_OBJECT = "no object on the table"
     SEVERAL_OBJECTS = "more than one object candidate"
     OCCLUDED = "object hidden by or touching the robot"
+    PARTIAL = "object half out of the camera's view"
+    TOUCHING = "objects touching: not told apart"
 
 
 @dataclass(frozen=True)
@@ -239,6 +242,79 @@ class TableRegion:
                    float(env.table.top_height))
 
 
+@dataclass
+class Pieces:
+    """What stands on the table in the region of one frame, split into connected pieces
+    (:meth:`ObjectDetector.segment`); each piece is the flat indices of its pixels in the region
+    window. The arrays are the window's, per pixel: height above the table (m), table-frame x and
+    y (m), footprint seen square-on (m^2).
+
+    :param count: pieces found, of every kind.
+    :param candidates: pieces that may be one object each.
+    :param occluded: pieces the robot hides or touches.
+    :param rejected: ``(why, piece)``: at the image's border, or too small or too large.
+    :param behind: pieces another piece stands in front of in the camera's view (only when
+        segmented with a ``depth_jump``): part of their top may be hidden.
+    """
+
+    count: int
+    candidates: List[np.ndarray]
+    occluded: List[np.ndarray]
+    rejected: List[Tuple[str, np.ndarray]]
+    height: np.ndarray
+    px: np.ndarray
+    py: np.ndarray
+    footprint: np.ndarray
+    table_from_optical: np.ndarray
+    intrinsics: Intrinsics
+    width: int
+    behind: List[np.ndarray] = dataclasses.field(default_factory=list)
+
+
+#: The eight neighbours of a pixel, (row, column) shifts: pieces are 8-connected
+#: (:func:`~fr5_rl.perception.morphology.label_components`), so a cut must be too.
+NEIGHBOURS = ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1))
+
+
+def _shifted(a: np.ndarray, dr: int, dc: int, fill) -> np.ndarray:
+    """``a`` moved by (dr, dc): entry (r, c) of the result is ``a[r + dr, c + dc]`` (``fill`` outside)."""
+    out = np.full_like(a, fill)
+    h, w = a.shape
+    out[max(-dr, 0):h - max(dr, 0), max(-dc, 0):w - max(dc, 0)] = a[max(dr, 0):h - max(-dr, 0),
+                                                                    max(dc, 0):w - max(-dc, 0)]
+    return out
+
+
+def _far_side_of_jumps(z: np.ndarray, standing: np.ndarray, jump: float) -> np.ndarray:
+    """Standing pixels with a standing neighbour nearer to the camera by more than ``jump`` (m):
+    the rim of whatever stands behind something else in the view."""
+    far = np.zeros_like(standing)
+    for dr, dc in NEIGHBOURS:
+        neighbour_z = _shifted(z, dr, dc, 0.0)
+        neighbour_standing = _shifted(standing, dr, dc, False)
+        far |= standing & neighbour_standing & (z - neighbour_z > jump)
+    return far
+
+
+def _labels_behind(labels: np.ndarray, z: np.ndarray, far: np.ndarray, jump: float) -> set:
+    """The labels of the pieces that stand behind another one: the rim pixels ``far`` next to a
+    labelled neighbour at about their depth (within ``jump``, m; the piece behind) and to one
+    nearer by more than ``jump`` of another piece (in front). A rim between two parts of one
+    piece (its own surface seen at a grazing angle) puts nothing behind."""
+    rim_label = np.zeros_like(labels)  # the piece a rim pixel belongs to
+    front_label = np.zeros_like(labels)  # a piece in front of it
+    for dr, dc in NEIGHBOURS:
+        neighbour_label = _shifted(labels, dr, dc, 0)
+        neighbour_z = _shifted(z, dr, dc, 0.0)
+        labelled = far & (neighbour_label > 0)
+        same = labelled & (np.abs(z - neighbour_z) <= jump)
+        rim_label[same] = neighbour_label[same]
+        nearer = labelled & (z - neighbour_z > jump)
+        front_label[nearer] = neighbour_label[nearer]
+    pairs = (rim_label > 0) & (front_label > 0) & (rim_label != front_label)
+    return {int(label) for label in np.unique(rim_label[pairs])}
+
+
 class ObjectDetector:
     """The object in a frame, given the camera model and the camera's pose over the table.
 
@@ -297,6 +373,31 @@ class ObjectDetector:
         :param color: (H, W, 3) uint8, unused by the geometry (kept for optional colour filters).
         :return: the :class:`Detection`, or the :class:`Refusal` saying why there is none.
         """
+        pieces = self.segment(depth, intrinsics, table_from_optical)
+        if pieces.count == 0:
+            return Refusal(RefusalReason.NO_OBJECT, "nothing stands on the table in the region")
+        if not pieces.candidates:
+            if pieces.occluded:
+                return Refusal(RefusalReason.OCCLUDED, f"{len(pieces.occluded)} piece(s) next to the robot")
+            rejected = [detail for detail, _ in pieces.rejected]
+            return Refusal(RefusalReason.NO_OBJECT, "pieces rejected: " + ", ".join(rejected) if rejected
+                           else "only pieces too small to be the object")
+        found = [self.measure(pieces, index) for index in pieces.candidates]
+        if len(found) > 1:
+            return Refusal(RefusalReason.SEVERAL_OBJECTS, f"{len(found)} candidates", tuple(found))
+        return found[0]
+
+    def segment(self, depth: np.ndarray, intrinsics: Intrinsics, table_from_optical: np.ndarray,
+                depth_jump: Optional[float] = None) -> "Pieces":
+        """The pieces standing on the table in the region, sorted: candidates, pieces the robot
+        hides or touches, and pieces rejected (at the image's border, too small or too large).
+
+        :param depth: as for :meth:`detect`.
+        :param depth_jump: m; None: pixels next to each other in the image are one piece
+            whatever their depths (one object). Given: neighbours further apart in depth than this
+            are cut apart, so that an object standing in front of another in the camera's view
+            is a piece of its own, and the one behind it goes to ``Pieces.behind``.
+        """
         s, t = self.settings, self.table
         rx, ry = self._ray_grid(intrinsics)
         # Only the part of the image where the placement region can show: all the rest is
@@ -318,51 +419,46 @@ class ObjectDetector:
         in_region = ((px >= t.region_low[0] - m) & (px <= t.region_high[0] + m)
                      & (py >= t.region_low[1] - m) & (py <= t.region_high[1] + m))
         standing = valid & in_region & (height > s.min_height) & ~robot
-        labels, count = label_components(standing)
+        far = _far_side_of_jumps(z, standing, depth_jump) if depth_jump is not None else None
+        labels, count = label_components(standing if far is None else standing & ~far)
+        # A pixel's footprint seen square-on: (z / f)^2 m^2.
+        footprint = (z / np.float32(intrinsics.fx)) * (z / np.float32(intrinsics.fy))
+        pieces = Pieces(count, [], [], [], height, px, py, footprint, table_from_optical, intrinsics, z.shape[1])
         if count == 0:
-            return Refusal(RefusalReason.NO_OBJECT, "nothing stands on the table in the region")
+            return pieces
+        behind = _labels_behind(labels, z, far, depth_jump) if far is not None else set()
         near_robot = dilate(robot, max(s.robot_margin_px, 1)) if robot.any() else robot
         flat = labels.ravel()
         labelled = np.flatnonzero(flat)
         order = labelled[np.argsort(flat[labelled], kind="stable")]
         bounds = np.searchsorted(flat[order], np.arange(1, count + 2))
-        # A pixel's footprint seen square-on: (z / f)^2 m^2.
-        footprint = (z / np.float32(intrinsics.fx)) * (z / np.float32(intrinsics.fy))
-        candidates: List[np.ndarray] = []
-        occluded, rejected = 0, []
-        h_img, w_img = z.shape
+        w_img = z.shape[1]
         for label in range(1, count + 1):
             index = order[bounds[label - 1]:bounds[label]]
             rows, cols = np.divmod(index, w_img)
             area = float(footprint.ravel()[index].sum())
             if near_robot.ravel()[index].any() and self._hidden_by_robot(labels == label, robot, z):
                 if area >= 0.25 * s.min_area:
-                    occluded += 1
+                    pieces.occluded.append(index)
                 continue
             if (rows.min() + top == 0 or cols.min() + left == 0 or rows.max() + top == depth.shape[0] - 1
                     or cols.max() + left == depth.shape[1] - 1):
-                rejected.append(f"{area * 1e4:.0f} cm^2 at the image border")
+                pieces.rejected.append((f"{area * 1e4:.0f} cm^2 at the image border", index))
+                continue
+            if label in behind:
+                pieces.behind.append(index)
                 continue
             if not s.min_area <= area <= s.max_area:
                 if area >= 0.25 * s.min_area:
-                    rejected.append(f"{area * 1e4:.1f} cm^2")
+                    pieces.rejected.append((f"{area * 1e4:.1f} cm^2", index))
                 continue
-            candidates.append(index)
-        if not candidates:
-            if occluded:
-                return Refusal(RefusalReason.OCCLUDED, f"{occluded} piece(s) next to the robot")
-            return Refusal(RefusalReason.NO_OBJECT, "pieces rejected: " + ", ".join(rejected) if rejected
-                           else "only pieces too small to be the object")
-        found = [self._measure(index, height, px, py, footprint, table_from_optical, intrinsics, w_img)
-                 for index in candidates]
-        if len(found) > 1:
-            return Refusal(RefusalReason.SEVERAL_OBJECTS, f"{len(found)} candidates", tuple(found))
-        return found[0]
+            pieces.candidates.append(index)
+        return pieces
 
-    def _measure(self, index: np.ndarray, height: np.ndarray, px: np.ndarray, py: np.ndarray,
-                 footprint: np.ndarray, table_from_optical: np.ndarray, intrinsics: Intrinsics,
-                 w_img: int) -> Detection:
-        """The :class:`Detection` of one candidate piece (flat indices into the region window)."""
+    def measure(self, pieces: "Pieces", index: np.ndarray) -> Detection:
+        """The :class:`Detection` of one piece of :meth:`segment` (flat indices into the region window)."""
+        height, px, py, footprint = pieces.height, pieces.px, pieces.py, pieces.footprint
+        table_from_optical, intrinsics, w_img = pieces.table_from_optical, pieces.intrinsics, pieces.width
         s, table_height = self.settings, self.table.table_height
         heights = height.ravel()[index]
         top_level = float(np.percentile(heights, 90))

@@ -8,7 +8,7 @@ image obeys exactly the model the CameraInfo carries.
 from __future__ import annotations
 
 import pkgutil
-from typing import Mapping, Optional, Sequence, Tuple
+from typing import List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 from .bullet import p
@@ -73,6 +73,7 @@ class SimulatedCamera:
         self.projection = np.asarray(projection, dtype=float).T.reshape(-1).tolist()
         self.renderer = renderer
         self._object_key: Optional[Tuple] = None
+        self._scene_bodies: List[Tuple[Tuple, int]] = []  # (shape key, body) of set_objects' objects
 
     def set_joints(self, positions: Mapping[str, float]) -> None:
         """Pose the robot: joint name -> position (rad, or m for the fingers); unknown names are
@@ -94,6 +95,22 @@ class SimulatedCamera:
             self._object_key = key
         p.resetBasePositionAndOrientation(self.world.object_id, list(position), list(quaternion),
                                           physicsClientId=self.client)
+
+    def set_objects(self, objects: Sequence[Tuple[str, Tuple[float, ...], Sequence[float], Sequence[float]]]) -> None:
+        """Place a scene of several objects, besides the one of :meth:`set_object` (which a scene
+        leaves out of sight): each ``(shape, dims, position, quaternion)`` as :meth:`set_object`
+        takes them. Bodies are kept while a scene's shapes stay the same, made anew otherwise.
+        """
+        keys = [(shape, tuple(round(float(d), 5) for d in dims)) for shape, dims, _, _ in objects]
+        if keys != [key for key, _ in self._scene_bodies]:
+            for _, body in self._scene_bodies:
+                self.world.remove_body(body)
+            self._scene_bodies = [(key, self.world.add_body(key[0], key[1], 0.0, 1.0)) for key in keys]
+        if self.world.object_id is not None:  # the single object, out of the way
+            p.resetBasePositionAndOrientation(self.world.object_id, [0.0, 0.0, -10.0], [0, 0, 0, 1],
+                                              physicsClientId=self.client)
+        for (_, body), (_, _, position, quaternion) in zip(self._scene_bodies, objects):
+            p.resetBasePositionAndOrientation(body, list(position), list(quaternion), physicsClientId=self.client)
 
     def render(self) -> Tuple[np.ndarray, np.ndarray]:
         """One frame: ``(rgb, depth)``, rgb (H, W, 3) uint8, depth (H, W) float32 metres along

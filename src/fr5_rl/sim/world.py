@@ -91,24 +91,41 @@ class PyBulletWorld:
         )
         return body
 
+    def add_body(self, shape: str, dims: Tuple[float, ...], mass: float, friction: float,
+                 color: Sequence[float] = (0.85, 0.2, 0.15, 1.0)) -> int:
+        """Another object, beside :attr:`object_id` (a scene of several objects): ``dims`` as for
+        :meth:`set_object`; returns its body id. Remove it with :meth:`remove_body`."""
+        collision, visual = self._shapes(shape, dims, color)
+        body = p.createMultiBody(mass, collision, visual, [0, 0, 1], physicsClientId=self.client)
+        p.changeDynamics(body, -1, lateralFriction=friction, spinningFriction=self.object_spinning_friction,
+                         rollingFriction=0.0001, physicsClientId=self.client)
+        return body
+
+    def remove_body(self, body: int) -> None:
+        """Remove a body made by :meth:`add_body`."""
+        p.removeBody(body, physicsClientId=self.client)
+
+    def _shapes(self, shape: str, dims: Tuple[float, ...], color: Sequence[float]) -> Tuple[int, int]:
+        """A new collision shape and (rendering worlds only) visual shape for an object."""
+        if shape == "cylinder":
+            radius, height = dims
+            collision = p.createCollisionShape(p.GEOM_CYLINDER, radius=radius, height=height,
+                                               physicsClientId=self.client)
+            visual = p.createVisualShape(p.GEOM_CYLINDER, radius=radius, length=height, rgbaColor=list(color),
+                                         physicsClientId=self.client) if self.renders else -1
+        elif shape == "box":
+            halves = [dims[0]] * 3 if len(dims) == 1 else list(dims)  # a cube, or (half_x, half_y, half_z)
+            collision = p.createCollisionShape(p.GEOM_BOX, halfExtents=halves, physicsClientId=self.client)
+            visual = p.createVisualShape(p.GEOM_BOX, halfExtents=halves, rgbaColor=list(color),
+                                         physicsClientId=self.client) if self.renders else -1
+        else:
+            raise ValueError(f"object.shape must be 'cylinder' or 'box', got '{shape}'")
+        return collision, visual
+
     def _create_object(self, shape: str, dims: Tuple[float, ...]) -> int:
         key = (shape, tuple(round(d, 6) for d in dims))
         if key != self._object_shape:  # shapes are reused while the size stays the same
-            color = [0.85, 0.2, 0.15, 1.0]
-            if shape == "cylinder":
-                radius, height = dims
-                collision = p.createCollisionShape(p.GEOM_CYLINDER, radius=radius, height=height,
-                                                   physicsClientId=self.client)
-                visual = p.createVisualShape(p.GEOM_CYLINDER, radius=radius, length=height, rgbaColor=color,
-                                             physicsClientId=self.client) if self.renders else -1
-            elif shape == "box":
-                halves = [dims[0]] * 3 if len(dims) == 1 else list(dims)  # a cube, or (half_x, half_y, half_z)
-                collision = p.createCollisionShape(p.GEOM_BOX, halfExtents=halves, physicsClientId=self.client)
-                visual = p.createVisualShape(p.GEOM_BOX, halfExtents=halves, rgbaColor=color,
-                                             physicsClientId=self.client) if self.renders else -1
-            else:
-                raise ValueError(f"object.shape must be 'cylinder' or 'box', got '{shape}'")
-            self._object_shapes, self._object_shape = (collision, visual), key
+            self._object_shapes, self._object_shape = self._shapes(shape, dims, (0.85, 0.2, 0.15, 1.0)), key
         return p.createMultiBody(1.0, *self._object_shapes, [0, 0, 1], physicsClientId=self.client)
 
     def place_object(self, position: Sequence[float], yaw: float = 0.0) -> None:
