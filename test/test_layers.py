@@ -80,7 +80,7 @@ ALLOWED = {
     "shared": {"shared"},
 }
 SHARED = {"config", "env_config", "kinematics", "observation", "control", "transforms", "gripper", "motion_guard",
-          "help_text", "draws", "objects", "fr5_rl"}
+          "help_text", "draws", "objects", "scenes", "fr5_rl"}
 
 
 def kind(module: str) -> str:

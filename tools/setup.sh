@@ -32,6 +32,8 @@ debian_ros_packages=(
   python3-tf2-ros python3-tf2-geometry-msgs python3-sensor-msgs python3-geometry-msgs
   python3-std-msgs python3-std-srvs python3-visualization-msgs ros-diagnostic-msgs python3-diagnostic-msgs
   python3-shape-msgs
+  ros-message-generation ros-message-runtime ros-std-msgs ros-geometry-msgs ros-shape-msgs
+  libstd-msgs-dev libgeometry-msgs-dev libshape-msgs-dev
   catkin librostest-dev liburdfdom-tools catkin-lint python3-venv python3-pip
   xvfb x11-apps imagemagick python3-message-filters libegl1 libegl-mesa0 python3-rosbag
 )
@@ -41,7 +43,7 @@ noetic_packages=(
   ros-noetic-robot-state-publisher ros-noetic-joint-state-publisher ros-noetic-rviz
   ros-noetic-tf2-ros ros-noetic-tf2-geometry-msgs ros-noetic-sensor-msgs ros-noetic-geometry-msgs
   ros-noetic-std-msgs ros-noetic-std-srvs ros-noetic-visualization-msgs ros-noetic-diagnostic-msgs
-  ros-noetic-shape-msgs
+  ros-noetic-shape-msgs ros-noetic-message-generation ros-noetic-message-runtime
   liburdfdom-tools python3-catkin-lint python3-venv python3-pip xvfb x11-apps imagemagick
   ros-noetic-message-filters ros-noetic-rosbag libegl1 libegl-mesa0
 )
@@ -97,7 +99,7 @@ fi
 [ -d "$repo/.catkin_ws" ] && { log "removing the old in-package workspace $repo/.catkin_ws"; rm -rf "$repo/.catkin_ws"; }
 mkdir -p "$ws/src"
 [ "$(readlink "$ws/src/fr5_rl" 2>/dev/null)" = "$repo" ] || ln -sfn "$repo" "$ws/src/fr5_rl"
-build_hash=$(cat package.xml CMakeLists.txt setup.py | sha1sum | cut -c1-12)
+build_hash=$(cat package.xml CMakeLists.txt setup.py msg/*.msg | sha1sum | cut -c1-12)
 if [ ! -f "$stamps/catkin-$build_hash" ] || [ ! -f "$ws/devel/setup.bash" ]; then
   log "building catkin workspace $ws"
   (

@@ -75,6 +75,29 @@ class TestVisionTopics(unittest.TestCase):
         # the arm at its start pose; here the image may be one frame older than the truth's stamp).
         self.assertLess(float(np.median(errors)), 0.005)
 
+    def test_every_object_is_reported_with_its_kind(self):
+        # detector_node.py ~objects: the one object of the scene (the simulator's cup), in the
+        # table frame with an image's stamp, its kind and centre those of the ground truth.
+        from fr5_rl.msg import DetectedObjects
+
+        truths = {}
+        rospy.Subscriber("/fr5_sim/object", Marker, lambda m: truths.__setitem__(m.header.stamp.to_nsec(), m),
+                         queue_size=200)
+        matched = 0
+        deadline = rospy.get_time() + 60.0
+        while matched < 5 and rospy.get_time() < deadline:
+            report = rospy.wait_for_message("/detector/objects", DetectedObjects, timeout=30.0)
+            self.assertEqual(report.header.frame_id, "base_link")
+            truth = truths.get(report.header.stamp.to_nsec())  # the image's stamp: the instant it shows
+            if truth is None or len(report.objects) != 1:
+                continue  # before the truth of that instant came, or the arm over the object
+            found = report.objects[0]
+            self.assertEqual(found.kind, "cylinder" if truth.type == Marker.CYLINDER else found.kind)
+            p, q = found.pose.position, truth.pose.position
+            self.assertLess(float(np.linalg.norm([p.x - q.x, p.y - q.y, p.z - q.z])), 0.01)
+            matched += 1
+        self.assertGreaterEqual(matched, 5, "too few reports matched to the ground truth of their instant")
+
 
 if __name__ == "__main__":
     rospy.init_node("test_vision_topics")

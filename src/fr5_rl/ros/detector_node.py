@@ -30,6 +30,11 @@ for the one thing standing on the table inside the placement region (config/env.
   node holds once its target is stale) and a warning says why, at once when the reason
   changes, then at most every 2 s.
 
+While something subscribes to ``~objects_topic`` (``~objects``), each frame also reports every
+object it shows whole there (``fr5_rl/DetectedObjects``: kind, pose upright at its yaw and shape,
+in the table frame, with the image's stamp), and every piece that is not one, with the reason
+(:func:`fr5_rl.perception.scene_detector.detect_scene`): for a cell with several objects.
+
 Every frame also goes to ``~debug_image_topic`` (rgb8) with the detection drawn (green: seen,
 yellow: hidden, blue: in the hand; a red frame when there is none), and per-frame compute times
 to ``~timing`` (Float64MultiArray: decode, detect, track, total, all seconds; and the image's
@@ -61,12 +66,14 @@ from ..perception.camera_model import Intrinsics
 from ..perception.detector import Detection, DetectorSettings, ObjectDetector, Refusal, RefusalReason, TableRegion
 from ..perception.images import InputError, check_frame, decode_color, decode_depth, intrinsics_from_camera_info
 from ..perception.overlay import draw_detection
+from ..perception.scene_detector import SceneLimits, detect_scene
+from ..scenes import SceneSettings
 from ..perception.tracker import ObjectTracker, TrackedObject, TrackerSettings, TrackState, rotation_z
 from ..transforms import matrix_from_quaternion, quaternion_from_matrix
 from .images import image_message
 from .params import exit_if_help_asked, node_parameters
 from .lifetime import init_node
-from .object_messages import primitive_from_shape
+from .object_messages import detected_objects_message, primitive_from_shape
 
 TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.ExtrapolationException,
              tf2_ros.InvalidArgumentException)
@@ -87,6 +94,9 @@ class DetectorNodeParams:
         joints (the arm's driver and a gripper driver may publish apart).
     :param hand_check_rate: Hz at which, between frames, the tcp and the fingers alone are checked
         for a lift of the tracked object in the hand (:meth:`ObjectTracker.hand_between_frames`); 0: off.
+    :param objects_topic: fr5_rl/DetectedObjects: every object a frame shows whole, with its kind,
+        and every piece refused, in the table frame (:func:`fr5_rl.perception.scene_detector.detect_scene`;
+        computed only while something subscribes); "" off.
     :param gripper_command_topic: std_msgs/Float64 (m) the fingers are told their opening on (the
         policy node's and the gripper bridge's); "" when none: a held object whose grip widens by
         ``tracker/release_opening`` then counts as let go, also while the fingers are told to
@@ -106,6 +116,7 @@ class DetectorNodeParams:
     detector: DetectorSettings
     tracker: TrackerSettings
     tcp_frame: str
+    objects_topic: str
     joint_states_topics: List[str]
     track_state_topic: str
     hand_check_rate: float
@@ -245,6 +256,13 @@ class DetectorNode:
         self.debug_pub = rospy.Publisher(params.debug_image_topic, Image, queue_size=1)
         self.state_pub = rospy.Publisher(params.track_state_topic, String, queue_size=1)
         self.timing_pub = rospy.Publisher("~timing", Float64MultiArray, queue_size=10)
+        self.objects_pub = None
+        if params.objects_topic:
+            from ..msg import DetectedObjects  # built by catkin from msg/
+
+            self.scene_limits = SceneLimits.from_objects(load_env_config().object.variety,
+                                                         SceneSettings.from_yaml().rectangular_min_difference)
+            self.objects_pub = rospy.Publisher(params.objects_topic, DetectedObjects, queue_size=1)
         for topic in params.joint_states_topics:
             rospy.Subscriber(topic, JointState, self.on_joint_state, queue_size=10, tcp_nodelay=True)
         if params.gripper_command_topic:
@@ -341,6 +359,7 @@ class DetectorNode:
                                  self.params.max_image_age, self.params.detector.min_valid_depth_fraction)
             if result is None:
                 result = self.detect(rgb, depth_m, intrinsics, color)
+                self.report_every_object(depth_m, intrinsics, color)
             detected = time.perf_counter()
             result = self.track(result, depth_m, intrinsics, stamp)
         tracked = time.perf_counter()
@@ -385,6 +404,14 @@ class DetectorNode:
         t, r = transform.transform.translation, transform.transform.rotation
         self.table_from_optical = matrix_from_quaternion((t.x, t.y, t.z), (r.x, r.y, r.z, r.w))
         return self.detector.detect(depth_m, intrinsics, self.table_from_optical, rgb)
+
+    def report_every_object(self, depth_m: np.ndarray, intrinsics: Intrinsics, color: Image) -> None:
+        """Every object the frame shows whole, and every piece refused, on ``~objects_topic``
+        (only while something subscribes: it is a second look at the frame)."""
+        if self.objects_pub is None or self.objects_pub.get_num_connections() == 0 or self.table_from_optical is None:
+            return
+        scene = detect_scene(self.detector, self.scene_limits, depth_m, intrinsics, self.table_from_optical)
+        self.objects_pub.publish(detected_objects_message(scene, color.header.stamp, self.params.table_frame))
 
     def publish_target(self, tracked: TrackedObject, stamp: rospy.Time, optical_frame: str) -> None:
         """:param stamp: the frame's capture time (or now, between frames).

@@ -42,3 +42,29 @@ def shape_from_primitive(message: SolidPrimitive) -> Tuple[ObjectShape, float]:
         return shape_from_extents("cylinder", (diameter, diameter, dimensions[SolidPrimitive.CYLINDER_HEIGHT]))
     raise ValueError(f"a SolidPrimitive of type {message.type}: the policy handles boxes ({SolidPrimitive.BOX}) "
                      f"and cylinders ({SolidPrimitive.CYLINDER})")
+
+
+def detected_objects_message(scene, stamp, frame_id: str):
+    """``fr5_rl/DetectedObjects`` of one frame's :class:`~fr5_rl.perception.scene_detector.SceneDetection`:
+    each object's centre upright at its yaw and its shape, each refused piece's reason and place,
+    in ``frame_id`` (the table frame the detector measures in) at ``stamp`` (the image's)."""
+    import math
+
+    from ..msg import DetectedObject, DetectedObjects, RefusedPiece
+
+    message = DetectedObjects()
+    message.header.stamp, message.header.frame_id = stamp, frame_id
+    for found in scene.objects:
+        detection = found.detection
+        item = DetectedObject(kind=found.label)
+        position, orientation = item.pose.position, item.pose.orientation
+        position.x, position.y, position.z = detection.position_table
+        orientation.z, orientation.w = math.sin(0.5 * detection.yaw), math.cos(0.5 * detection.yaw)
+        if detection.shape is not None:
+            item.shape = primitive_from_shape(detection.shape)
+        message.objects.append(item)
+    for piece in scene.refused:
+        refused = RefusedPiece(reason=piece.reason.name, detail=piece.detail)
+        refused.position.x, refused.position.y, refused.position.z = piece.position_table
+        message.refused.append(refused)
+    return message
