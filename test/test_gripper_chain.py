@@ -12,6 +12,7 @@ from fr5_rl.envs import FR5Env
 from fr5_rl.gripper import BridgedGripper, percent_to_width, width_to_percent
 from fr5_rl.motion_guard import load_guard_settings
 from fr5_rl.sim.gripper_chain import SETTLE_S, EmulatedGripperChain
+from gripper_helpers import close_reading_back
 
 ROBOT = load_robot_spec()
 MAX_WIDTH = ROBOT.max_opening_width
@@ -84,13 +85,7 @@ def test_the_environment_observes_the_chains_read_back_in_bridge_episodes():
     try:
         assert isinstance(env.episode.chain.bridge_model, EmulatedGripperChain)
         env.reset(seed=5)
-        close = np.zeros(7)
-        close[6] = -1.0
-        seen, measured = [], []
-        for _ in range(25):
-            env.step(close)
-            seen.append(env.episode.chain.bridge.read_width)
-            measured.append(sum(env.episode.joint_states().positions[6:]))
+        seen, measured = close_reading_back(env, 25)
         assert all(whole_percent(width) for width in seen)
         assert measured[-1] < MAX_WIDTH - 0.02  # the fingers closed ...
         assert np.mean(np.asarray(seen) - np.asarray(measured)) > 0.002  # ... and the read-back lagged them

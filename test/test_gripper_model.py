@@ -7,6 +7,7 @@ import pytest
 from fr5_rl.config import ConfigError, load_robot_spec, load_yaml
 from fr5_rl.envs import FR5Env
 from fr5_rl.gripper import BridgedGripper, BridgeTiming, load_bridge_timing, percent_to_width, width_to_percent
+from gripper_helpers import close_reading_back
 
 MAX_WIDTH = load_robot_spec().max_opening_width
 TIMING = BridgeTiming(call_period=0.1, read_period=0.1, deadband_percent=2, zero_debounce=0.3)
@@ -78,13 +79,7 @@ def test_the_environment_observes_the_read_back_in_bridge_episodes():
     env = FR5Env(task="grasp", config={"randomisation": {**PERTURBED, "gripper_bridge_share": 1.0}})
     try:
         env.reset(seed=5)
-        close = np.zeros(7)
-        close[6] = -1.0
-        seen, measured = [], []
-        for _ in range(20):
-            obs, *_ = env.step(close)
-            seen.append(env.episode.chain.bridge.read_width)
-            measured.append(sum(env.episode.joint_states().positions[6:]))
+        seen, measured = close_reading_back(env, 20)
         # Whole percent, changing at most every 5 steps (10 Hz against 50 Hz), lagging the fingers.
         assert all(100 * w / MAX_WIDTH == pytest.approx(round(100 * w / MAX_WIDTH)) for w in seen)
         changes = [k for k in range(1, len(seen)) if seen[k] != seen[k - 1]]
@@ -340,13 +335,7 @@ def test_the_trackers_grasp_is_judged_by_the_bridges_read_back():
         judged = []
         judge = env.episode.held_as_the_camera_sees
         env.episode.held_as_the_camera_sees = lambda state: judged.append(state.gripper_width) or judge(state)
-        close = np.zeros(7)
-        close[6] = -1.0
-        read_back, fingers = [], []
-        for _ in range(20):
-            env.step(close)
-            read_back.append(env.episode.chain.bridge.read_width)
-            fingers.append(sum(env.episode.joint_states().positions[6:]))
+        read_back, fingers = close_reading_back(env, 20)
         assert judged == pytest.approx(read_back)
         assert max(abs(np.asarray(read_back) - np.asarray(fingers))) > 0.005  # the two differed while closing
     finally:

@@ -10,7 +10,7 @@ from fr5_rl.config import ConfigError, load_robot_spec, load_yaml
 from fr5_rl.env_config import load_env_config
 from fr5_rl.objects import ObjectShape
 from fr5_rl.perception.detector import DetectorSettings, ObjectDetector, RefusalReason, TableRegion
-from fr5_rl.perception.scene_detector import SceneLimits, _convexity, angle_difference, detect_scene
+from fr5_rl.perception.scene_detector import SceneLimits, _convexity, detect_scene
 from fr5_rl.scenes import SceneObject, SceneSettings, draw_scene
 
 ENV = load_env_config()
@@ -77,12 +77,6 @@ def test_a_face_of_two_footprints_joined_is_not_convex():
     assert _convexity(two[0], two[1], np.full(two.shape[1], step ** 2)) < limit
 
 
-def test_angles_differ_modulo_the_tops_symmetry():
-    assert angle_difference(0.1, 0.1 + math.pi / 2, 4) == pytest.approx(0.0, abs=1e-12)
-    assert angle_difference(0.1, 0.1 + math.pi / 2, 2) == pytest.approx(math.pi / 2)
-    assert angle_difference(0.3, -2.0, 0) == 0.0
-
-
 # ----------------------------------------------------------------------------- through the camera
 @pytest.fixture(scope="module")
 def camera_view():
@@ -129,7 +123,7 @@ def test_each_object_of_a_scene_is_found_with_its_kind_yaw_and_size(camera_view)
         assert math.dist(found.detection.position_table[:2], truth.position[:2]) < 0.005
         assert found.label == truth.shape.label
         if truth.shape.kind == "box":
-            assert math.degrees(angle_difference(found.detection.yaw, truth.yaw, truth.shape.symmetry_order)) < 5.0
+            assert math.degrees(truth.shape.yaw_error(found.detection.yaw, truth.yaw)) < 5.0
         assert max(abs(a - b) for a, b in zip(found.detection.extents, truth.shape.size[:2])) < 0.005
 
 

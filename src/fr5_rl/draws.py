@@ -14,7 +14,7 @@ from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
-from .config import RobotSpec
+from .config import ConfigError, RobotSpec
 from .env_config import EnvConfig
 
 
@@ -190,9 +190,13 @@ def draw_place(rng: np.random.Generator, cfg: EnvConfig) -> Tuple[Tuple[float, f
     return (float(xy[0]), float(xy[1])), float(rng.uniform(-np.pi, np.pi))
 
 
-def draw_object(rng: np.random.Generator, cfg: EnvConfig) -> Tuple[str, Tuple[float, ...], float]:
+def draw_object(rng: np.random.Generator, cfg: EnvConfig,
+                oblong_difference: float = 0.0) -> Tuple[str, Tuple[float, ...], float]:
     """One object of ``object.variety``: its kind, nominal dimensions and mass.
 
+    :param oblong_difference: m; an oblong box's top sides at least this far apart (the scenes of
+        several objects, so that its kind is one a camera can tell: :mod:`fr5_rl.scenes`); 0: drawn
+        independently, as the environment draws them.
     :return: the kind; (radius, height) of a cylinder or (half_x, half_y, half_z) of a box with
         ``half_x >= half_y`` (its longer top side along its own x), m; the mass, kg.
     """
@@ -203,10 +207,27 @@ def draw_object(rng: np.random.Generator, cfg: EnvConfig) -> Tuple[str, Tuple[fl
                                    float(rng.uniform(*variety.cylinder_height)))
     else:
         side = float(rng.uniform(*variety.box_side))
-        other = side if rng.uniform() < variety.box_square_share else float(rng.uniform(*variety.box_side))
+        if rng.uniform() < variety.box_square_share:
+            other = side
+        elif oblong_difference <= 0.0:
+            other = float(rng.uniform(*variety.box_side))
+        else:
+            other = _other_side(rng, variety.box_side, side, oblong_difference)
         height = float(rng.uniform(*variety.box_height))
         dims = (max(side, other) / 2.0, min(side, other) / 2.0, height / 2.0)
     return kind, dims, float(rng.uniform(*variety.mass))
+
+
+def _other_side(rng: np.random.Generator, box_side: Sequence[float], side: float, difference: float) -> float:
+    """A box's second top side (m), uniform over ``box_side`` less the band within ``difference``
+    of ``side`` (one draw, as the unconstrained side takes)."""
+    low, high = float(box_side[0]), float(box_side[1])
+    below, above = max(0.0, side - difference - low), max(0.0, high - side - difference)
+    if below + above <= 0.0:
+        raise ConfigError(f"object.variety.box_side {list(box_side)} is too narrow for oblong tops with sides "
+                          f"{difference:g} m apart")
+    pick = float(rng.uniform(0.0, below + above))
+    return low + pick if pick < below else side + difference + (pick - below)
 
 
 def draw_goal(rng: np.random.Generator, cfg: EnvConfig, object_xy: Sequence[float]) -> Tuple[float, float, float]:

@@ -19,6 +19,7 @@ from typing import List, Optional, Tuple, Union
 import numpy as np
 
 from .config import ConfigError, load_typed
+from .draws import draw_object
 from .env_config import EnvConfig
 from .objects import ObjectShape
 
@@ -101,32 +102,14 @@ class SceneObject:
 
 
 def draw_shape(rng: np.random.Generator, cfg: EnvConfig, settings: SceneSettings) -> Tuple[ObjectShape, float]:
-    """One object of ``object.variety``'s kinds and ranges (whether the variety is on in ``cfg``
-    or not), an oblong box's sides at least ``rectangular_min_difference`` apart.
+    """One object as the environment draws it (:func:`fr5_rl.draws.draw_object`: ``object.variety``'s
+    kinds and ranges, whether the variety is on in ``cfg`` or not), an oblong box's top sides at
+    least ``rectangular_min_difference`` apart.
 
     :return: its shape and mass (kg).
     """
-    variety = cfg.object.variety
-    kind = variety.kinds[int(rng.integers(len(variety.kinds)))]
-    if kind == "cylinder":
-        radius = float(rng.uniform(*variety.cylinder_radius))
-        shape = ObjectShape("cylinder", (2.0 * radius, 2.0 * radius, float(rng.uniform(*variety.cylinder_height))))
-    else:
-        low, high = variety.box_side
-        side = float(rng.uniform(low, high))
-        if rng.uniform() < variety.box_square_share:
-            other = side
-        else:
-            gap = settings.rectangular_min_difference
-            # The other side anywhere in range at least `gap` away from this one.
-            below, above = max(0.0, side - gap - low), max(0.0, high - side - gap)
-            if below + above <= 0.0:
-                raise ConfigError(f"object.variety.box_side {variety.box_side} is too narrow for oblong tops "
-                                  f"{gap:g} m apart (config/scenes.yaml rectangular_min_difference)")
-            pick = float(rng.uniform(0.0, below + above))
-            other = low + pick if pick < below else side + gap + (pick - below)
-        shape = ObjectShape("box", (max(side, other), min(side, other), float(rng.uniform(*variety.box_height))))
-    return shape, float(rng.uniform(*variety.mass))
+    kind, dims, mass = draw_object(rng, cfg, settings.rectangular_min_difference)
+    return ObjectShape.from_dims(kind, dims), mass
 
 
 def draw_scene(rng: np.random.Generator, cfg: EnvConfig, settings: SceneSettings,

@@ -42,7 +42,7 @@ def run(scenes: int, seed: int, touching: float, match: float, noise: Optional[f
     from fr5_rl.env_config import load_env_config
     from fr5_rl.perception.camera_model import Intrinsics
     from fr5_rl.perception.detector import DetectorSettings, ObjectDetector, TableRegion
-    from fr5_rl.perception.scene_detector import SceneLimits, angle_difference, detect_scene
+    from fr5_rl.perception.scene_detector import SceneLimits, detect_scene
     from fr5_rl.scenes import SceneSettings, draw_scene
     from fr5_rl.sim.camera import SimulatedCamera, depth_to_millimetres
     from fr5_rl.transforms import load_transform_files, transform_in
@@ -110,7 +110,7 @@ def run(scenes: int, seed: int, touching: float, match: float, noise: Optional[f
             row["position_mm"].append(1000.0 * distances[nearest])
             row["kind_right"].append(found.label == label)
             if truth.shape.kind == "box" and d.kind == "box":
-                row["yaw_deg"].append(math.degrees(angle_difference(d.yaw, truth.yaw, truth.shape.symmetry_order)))
+                row["yaw_deg"].append(math.degrees(truth.shape.yaw_error(d.yaw, truth.yaw)))
             row["size_mm"].append(1000.0 * size_error)
         for index, truth in enumerate(scene):
             if index not in matched and not in_pair[index]:

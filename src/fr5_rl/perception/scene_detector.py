@@ -259,10 +259,3 @@ def _hull(points: np.ndarray) -> np.ndarray:
 def _cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
 
-
-def angle_difference(a: float, b: float, order: int) -> float:
-    """rad between two yaws modulo a top's symmetry (``order`` 2 or 4; 0: none matters)."""
-    if order == 0:
-        return 0.0
-    period = 2.0 * math.pi / order
-    return abs(math.remainder(a - b, period))
