@@ -83,7 +83,7 @@ class TestVisionTopics(unittest.TestCase):
         truths = {}
         rospy.Subscriber("/fr5_sim/object", Marker, lambda m: truths.__setitem__(m.header.stamp.to_nsec(), m),
                          queue_size=200)
-        matched = 0
+        matched, ids = 0, set()
         deadline = rospy.get_time() + 60.0
         while matched < 5 and rospy.get_time() < deadline:
             report = rospy.wait_for_message("/detector/objects", DetectedObjects, timeout=30.0)
@@ -93,10 +93,15 @@ class TestVisionTopics(unittest.TestCase):
                 continue  # before the truth of that instant came, or the arm over the object
             found = report.objects[0]
             self.assertEqual(found.kind, "cylinder" if truth.type == Marker.CYLINDER else found.kind)
+            self.assertGreater(found.id, 0)
+            ids.add(found.id)
             p, q = found.pose.position, truth.pose.position
             self.assertLess(float(np.linalg.norm([p.x - q.x, p.y - q.y, p.z - q.z])), 0.01)
             matched += 1
         self.assertGreaterEqual(matched, 5, "too few reports matched to the ground truth of their instant")
+        # One object standing still: one id (the policy's arm may hide it; a new episode places a
+        # new object, which may take a new id).
+        self.assertLessEqual(len(ids), 2, ids)
 
 
 if __name__ == "__main__":

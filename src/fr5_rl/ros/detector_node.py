@@ -31,8 +31,8 @@ for the one thing standing on the table inside the placement region (config/env.
   changes, then at most every 2 s.
 
 While something subscribes to ``~objects_topic`` (``~objects``), each frame also reports every
-object it shows whole there (``fr5_rl/DetectedObjects``: kind, pose upright at its yaw and shape,
-in the table frame, with the image's stamp), and every piece that is not one, with the reason
+object it shows whole there (``fr5_rl/DetectedObjects``: an id it keeps while tracked, kind, pose upright
+at its yaw and shape, in the table frame, with the image's stamp), and every piece that is not one, with the reason
 (:func:`fr5_rl.perception.scene_detector.detect_scene`): for a cell with several objects.
 
 Every frame also goes to ``~debug_image_topic`` (rgb8) with the detection drawn (green: seen,
@@ -67,6 +67,7 @@ from ..perception.detector import Detection, DetectorSettings, ObjectDetector, R
 from ..perception.images import InputError, check_frame, decode_color, decode_depth, intrinsics_from_camera_info
 from ..perception.overlay import draw_detection
 from ..perception.scene_detector import SceneLimits, detect_scene
+from ..perception.scene_tracker import SceneTracker
 from ..scenes import SceneSettings
 from ..perception.tracker import ObjectTracker, TrackedObject, TrackerSettings, TrackState, rotation_z
 from ..transforms import matrix_from_quaternion, quaternion_from_matrix
@@ -97,6 +98,9 @@ class DetectorNodeParams:
     :param objects_topic: fr5_rl/DetectedObjects: every object a frame shows whole, with its kind,
         and every piece refused, in the table frame (:func:`fr5_rl.perception.scene_detector.detect_scene`;
         computed only while something subscribes); "" off.
+    :param objects_gate: m: an object this near where one of its kind was last seen keeps that
+        one's id (:class:`fr5_rl.perception.scene_tracker.SceneTracker`; unseen, an id lasts
+        ``tracker.hidden_timeout``).
     :param gripper_command_topic: std_msgs/Float64 (m) the fingers are told their opening on (the
         policy node's and the gripper bridge's); "" when none: a held object whose grip widens by
         ``tracker/release_opening`` then counts as let go, also while the fingers are told to
@@ -117,6 +121,7 @@ class DetectorNodeParams:
     tracker: TrackerSettings
     tcp_frame: str
     objects_topic: str
+    objects_gate: float
     joint_states_topics: List[str]
     track_state_topic: str
     hand_check_rate: float
@@ -263,6 +268,7 @@ class DetectorNode:
             self.scene_limits = SceneLimits.from_objects(load_env_config().object.variety,
                                                          SceneSettings.from_yaml().rectangular_min_difference)
             self.objects_pub = rospy.Publisher(params.objects_topic, DetectedObjects, queue_size=1)
+            self.scene_tracker = SceneTracker(params.objects_gate, params.tracker.hidden_timeout)
         for topic in params.joint_states_topics:
             rospy.Subscriber(topic, JointState, self.on_joint_state, queue_size=10, tcp_nodelay=True)
         if params.gripper_command_topic:
@@ -411,7 +417,8 @@ class DetectorNode:
         if self.objects_pub is None or self.objects_pub.get_num_connections() == 0 or self.table_from_optical is None:
             return
         scene = detect_scene(self.detector, self.scene_limits, depth_m, intrinsics, self.table_from_optical)
-        self.objects_pub.publish(detected_objects_message(scene, color.header.stamp, self.params.table_frame))
+        ids = [track_id for track_id, _ in self.scene_tracker.update(scene, color.header.stamp.to_sec())]
+        self.objects_pub.publish(detected_objects_message(scene, ids, color.header.stamp, self.params.table_frame))
 
     def publish_target(self, tracked: TrackedObject, stamp: rospy.Time, optical_frame: str) -> None:
         """:param stamp: the frame's capture time (or now, between frames).

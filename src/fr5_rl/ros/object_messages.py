@@ -7,7 +7,7 @@ y side is its longer one is the same box turned a quarter (:func:`~fr5_rl.object
 """
 from __future__ import annotations
 
-from typing import Tuple
+from typing import Sequence, Tuple
 
 from shape_msgs.msg import SolidPrimitive
 
@@ -44,19 +44,20 @@ def shape_from_primitive(message: SolidPrimitive) -> Tuple[ObjectShape, float]:
                      f"and cylinders ({SolidPrimitive.CYLINDER})")
 
 
-def detected_objects_message(scene, stamp, frame_id: str):
+def detected_objects_message(scene, ids: Sequence[int], stamp, frame_id: str):
     """``fr5_rl/DetectedObjects`` of one frame's :class:`~fr5_rl.perception.scene_detector.SceneDetection`:
-    each object's centre upright at its yaw and its shape, each refused piece's reason and place,
-    in ``frame_id`` (the table frame the detector measures in) at ``stamp`` (the image's)."""
+    each object's id (``ids``, in the order of ``scene.objects``), its centre upright at its yaw
+    and its shape, each refused piece's reason and place, in ``frame_id`` (the table frame the
+    detector measures in) at ``stamp`` (the image's)."""
     import math
 
     from ..msg import DetectedObject, DetectedObjects, RefusedPiece
 
     message = DetectedObjects()
     message.header.stamp, message.header.frame_id = stamp, frame_id
-    for found in scene.objects:
+    for track_id, found in zip(ids, scene.objects):
         detection = found.detection
-        item = DetectedObject(kind=found.label)
+        item = DetectedObject(id=track_id, kind=found.label)
         position, orientation = item.pose.position, item.pose.orientation
         position.x, position.y, position.z = detection.position_table
         orientation.z, orientation.w = math.sin(0.5 * detection.yaw), math.cos(0.5 * detection.yaw)
