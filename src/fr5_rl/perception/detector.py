@@ -252,7 +252,8 @@ class Pieces:
     :param count: pieces found, of every kind.
     :param candidates: pieces that may be one object each.
     :param occluded: pieces the robot hides or touches.
-    :param rejected: ``(why, piece)``: at the image's border, or too small or too large.
+    :param rejected: ``(why, piece)``: too small or too large.
+    :param at_border: ``(why, piece)``: touching the image's border (partly in view).
     :param behind: pieces another piece stands in front of in the camera's view (only when
         segmented with a ``depth_jump``): part of their top may be hidden.
     """
@@ -269,6 +270,7 @@ class Pieces:
     intrinsics: Intrinsics
     width: int
     behind: List[np.ndarray] = dataclasses.field(default_factory=list)
+    at_border: List[Tuple[str, np.ndarray]] = dataclasses.field(default_factory=list)
 
 
 #: The eight neighbours of a pixel, (row, column) shifts: pieces are 8-connected
@@ -379,7 +381,7 @@ class ObjectDetector:
         if not pieces.candidates:
             if pieces.occluded:
                 return Refusal(RefusalReason.OCCLUDED, f"{len(pieces.occluded)} piece(s) next to the robot")
-            rejected = [detail for detail, _ in pieces.rejected]
+            rejected = [detail for detail, _ in pieces.at_border + pieces.rejected]
             return Refusal(RefusalReason.NO_OBJECT, "pieces rejected: " + ", ".join(rejected) if rejected
                            else "only pieces too small to be the object")
         found = [self.measure(pieces, index) for index in pieces.candidates]
@@ -443,7 +445,7 @@ class ObjectDetector:
                 continue
             if (rows.min() + top == 0 or cols.min() + left == 0 or rows.max() + top == depth.shape[0] - 1
                     or cols.max() + left == depth.shape[1] - 1):
-                pieces.rejected.append((f"{area * 1e4:.0f} cm^2 at the image border", index))
+                pieces.at_border.append((f"{area * 1e4:.0f} cm^2 at the image border", index))
                 continue
             if label in behind:
                 pieces.behind.append(index)

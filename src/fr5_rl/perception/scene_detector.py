@@ -29,6 +29,8 @@ from .detector import Detection, ObjectDetector, Pieces, RefusalReason
 #: A second top level must cover this much of its outline (cells counted), so that a side's band
 #: of points is no top.
 LEVEL_CONVEXITY = 0.7
+#: m, the height bins a second level is looked for in (it takes its bin and the two beside it).
+LEVEL_BIN = 0.004
 #: m, the cells a second level's points are counted in: coarser than a pixel's footprint, so that
 #: a top seen at a slant has no holes.
 LEVEL_CELL = 0.005
@@ -124,10 +126,10 @@ def detect_scene(detector: ObjectDetector, limits: SceneLimits, depth: np.ndarra
     for index in pieces.behind:
         refused.append(RefusedPiece(RefusalReason.OCCLUDED, "behind another object in the camera's view",
                                     _centre(pieces, index)))
+    for detail, index in pieces.at_border:
+        refused.append(RefusedPiece(RefusalReason.PARTIAL, f"half out of view: {detail}", _centre(pieces, index)))
     for detail, index in pieces.rejected:
-        if "border" in detail:
-            refused.append(RefusedPiece(RefusalReason.PARTIAL, f"half out of view: {detail}", _centre(pieces, index)))
-        elif float(pieces.footprint.ravel()[index].sum()) > detector.settings.max_area:
+        if float(pieces.footprint.ravel()[index].sum()) > detector.settings.max_area:
             refused.append(RefusedPiece(RefusalReason.TOUCHING, f"{detail}: larger than any one object",
                                         _centre(pieces, index)))
         else:
@@ -170,7 +172,7 @@ def _several(pieces: Pieces, index: np.ndarray, detection: Detection, limits: Sc
     # are vertical, so their points spread over many heights and cover no area at any one).
     below = heights < detection.top_height - limits.level_gap
     if below.sum() > 0:
-        bins = np.round(heights[below] / 0.004)
+        bins = np.round(heights[below] / LEVEL_BIN)
         values, counts = np.unique(bins, return_counts=True)
         level = values[np.argmax(counts)]
         on_level = below.copy()
@@ -179,7 +181,7 @@ def _several(pieces: Pieces, index: np.ndarray, detection: Detection, limits: Sc
         # Most of the smallest top, and whole: an object's side seen at a slant leaves a
         # thin band of points at each height, spread further by depth noise.
         if area >= 0.75 * limits.min_top and _convexity(x[on_level], y[on_level], cell=LEVEL_CELL) >= LEVEL_CONVEXITY:
-            return (f"a second top {area * 1e4:.0f} cm^2 at {level * 0.4:.1f} cm, below this one at "
+            return (f"a second top {area * 1e4:.0f} cm^2 at {level * LEVEL_BIN * 100:.1f} cm, below this one at "
                     f"{detection.top_height * 100:.1f} cm: objects touching")
     return None
 
