@@ -66,7 +66,7 @@ def test_a_face_of_two_footprints_joined_is_not_convex():
     step = 0.0015  # m between the points, each covering step^2
     grid = np.arange(0.0, 0.05, step)
     x, y = [a.ravel() for a in np.meshgrid(grid, grid)]
-    limit = SceneLimits.from_objects(ENV.object.variety, 0.015).min_convexity
+    limit = SceneLimits.from_objects(ENV.object.variety, 0.015).settings.min_convexity
     assert _convexity(x, y, np.full(x.size, step ** 2)) > 0.97  # a square
     disc = np.hypot(x - 0.025, y - 0.025) <= 0.025
     assert _convexity(x[disc], y[disc], np.full(disc.sum(), step ** 2)) > 0.95

@@ -288,7 +288,8 @@ class ControlChain:
     # ------------------------------------------------------------------ the way back
     def sense(self, measured: Measurement, tcp_axis: Optional[Sequence[float]], object_position: Sequence[float],
               tcp_to_object_distance: float, held: bool, sample_time: float, now: float,
-              rng: np.random.Generator, object_yaw: float = 0.0, around: bool = False) -> Sensed:
+              rng: np.random.Generator, object_yaw: float = 0.0, around: bool = False,
+              read_back: Optional[float] = None) -> Sensed:
         """What the policy is given: the arm as ``measured`` (at ``sample_time``, s since the
         start), the object as the camera's timing shows it at ``now``.
 
@@ -301,13 +302,15 @@ class ControlChain:
         :param object_yaw: the object's true yaw now (rad, base_link).
         :param around: the fingers are around the object as the tracker decides it, held or not
             (read only with ``randomisation.target_in_hand_from_grasp``).
+        :param read_back: the bridge's read-back of the opening at ``sample_time`` (m), where the
+            caller has already taken it (the episode, for the tracker's judgement); None: taken here.
         """
         q, velocities, width, tcp_position, tcp_quaternion = measured
         if tcp_axis is None:
             tcp_axis = quaternion_z_axis(tcp_quaternion)
         self.observed_joint_positions = q
         if self._bridge is not None:
-            width = self._bridge.observe(width, sample_time)
+            width = self._bridge.observe(width, sample_time) if read_back is None else read_back
         if self._target is not None:
             # The yaw travels with the position: a frame captured while the hand hides the object
             # shows the yaw last seen too (an object nudged then is carried at it, unless the pads

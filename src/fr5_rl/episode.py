@@ -148,9 +148,9 @@ class Episode:
         # The detector's tracker judges the fingers by the gripper bridge's read-back, as the
         # policy does, where a bridge stands in between: not by the fingers themselves (a
         # read-back that lags a grasp leaves the object on the table for the tracker).
-        tracked = state
+        tracked, read_back = state, None
         if chain.sees_through_camera and chain.bridge is not None:
-            read_back = chain.bridge.observe(reading.gripper_width, now - age)  # sense() then reads the same
+            read_back = chain.bridge.observe(reading.gripper_width, now - age)
             tracked = dataclasses.replace(state, gripper_width=read_back)
         held = chain.sees_through_camera and self.held_as_the_camera_sees(tracked)
         around = held or (chain.sees_through_camera and self.cfg.randomisation.target_in_hand_from_grasp
@@ -158,7 +158,7 @@ class Episode:
         builder = self.observation_builder
         object_yaw = yaw_of(state.object_quaternion) if builder.object_features or builder.include_goal else 0.0
         sensed = chain.sense(reading, tcp_axis, state.object_position, state.tcp_to_object_distance, held,
-                             now - age, now, rng, object_yaw, around)
+                             now - age, now, rng, object_yaw, around, read_back)
         object_yaw = sensed.object_yaw
         shape = (object_features(self.plant.object_shape, object_yaw, yaw_of(reading.tcp_quaternion))
                  if builder.object_features else ())

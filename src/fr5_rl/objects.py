@@ -130,6 +130,11 @@ def held_in_tcp(grasp_position: Sequence[float], grasp_rotation: Sequence[Sequen
     return offset - float(offset @ axis) * axis
 
 
+def quaternion_of_yaw(yaw: float) -> Tuple[float, float, float, float]:
+    """(x, y, z, w) of a frame turned ``yaw`` (rad) about the parent's z axis: upright at that yaw."""
+    return 0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)
+
+
 def yaw_of(quaternion: Sequence[float]) -> float:
     """Yaw (rad) of a frame's x axis in the parent's xy plane, from its quaternion (x, y, z, w)."""
     x, y, z, w = quaternion

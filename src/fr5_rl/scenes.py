@@ -21,7 +21,7 @@ import numpy as np
 from .config import ConfigError, load_typed
 from .draws import draw_object
 from .env_config import EnvConfig
-from .objects import ObjectShape
+from .objects import ObjectShape, quaternion_of_yaw
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,7 @@ class SceneObject:
     @property
     def quaternion(self) -> Tuple[float, float, float, float]:
         """(x, y, z, w): upright at its yaw."""
-        return 0.0, 0.0, math.sin(0.5 * self.yaw), math.cos(0.5 * self.yaw)
+        return quaternion_of_yaw(self.yaw)
 
     @property
     def dims(self) -> Tuple[float, ...]:

@@ -83,7 +83,7 @@ class TestVisionTopics(unittest.TestCase):
         truths = {}
         rospy.Subscriber("/fr5_sim/object", Marker, lambda m: truths.__setitem__(m.header.stamp.to_nsec(), m),
                          queue_size=200)
-        matched, ids = 0, set()
+        matched, ids, errors = 0, set(), []
         deadline = rospy.get_time() + 60.0
         while matched < 5 and rospy.get_time() < deadline:
             report = rospy.wait_for_message("/detector/objects", DetectedObjects, timeout=30.0)
@@ -92,13 +92,17 @@ class TestVisionTopics(unittest.TestCase):
             if truth is None or len(report.objects) != 1:
                 continue  # before the truth of that instant came, or the arm over the object
             found = report.objects[0]
-            self.assertEqual(found.kind, "cylinder" if truth.type == Marker.CYLINDER else found.kind)
+            kinds = ("cylinder",) if truth.type == Marker.CYLINDER else ("square box", "rectangular box")
+            self.assertIn(found.kind, kinds)
             self.assertGreater(found.id, 0)
             ids.add(found.id)
             p, q = found.pose.position, truth.pose.position
-            self.assertLess(float(np.linalg.norm([p.x - q.x, p.y - q.y, p.z - q.z])), 0.01)
+            error = float(np.linalg.norm([p.x - q.x, p.y - q.y, p.z - q.z]))
+            self.assertLess(error, 0.01)
+            errors.append(error)
             matched += 1
         self.assertGreaterEqual(matched, 5, "too few reports matched to the ground truth of their instant")
+        rospy.loginfo(f"every-object report's error vs truth (m): {errors}")
         # One object standing still: one id (the policy's arm may hide it; a new episode places a
         # new object, which may take a new id).
         self.assertLessEqual(len(ids), 2, ids)

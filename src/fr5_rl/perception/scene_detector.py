@@ -19,12 +19,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Optional, Tuple
+from pathlib import Path
+from typing import Optional, Tuple, Union
 
 import numpy as np
 
 from .camera_model import Intrinsics
-from .detector import Detection, ObjectDetector, Pieces, RefusalReason
+from ..config import ConfigError
+from .detector import Detection, ObjectDetector, Pieces, RefusalReason, load_section
 
 #: A second top level must cover this much of its outline (cells counted), so that a side's band
 #: of points is no top.
@@ -40,39 +42,65 @@ FACE_CELL = 0.003
 
 
 @dataclass(frozen=True)
-class SceneLimits:
-    """What one object can look like, from the objects a cell handles.
+class SceneDetectorSettings:
+    """The ``scene`` section of ``config/detector.yaml``: how pieces are cut apart and told from
+    several objects touching (:func:`detect_scene`).
 
-    :param max_side: m, the longest top side (or diameter) of any object; a wider top face is
-        several objects.
-    :param side_tolerance: m added to it for the measurement's error.
+    :param depth_jump: m: neighbouring pixels further apart in depth are two things, one in front
+        of the other.
+    :param side_tolerance: m added to the widest object's side for the measurement's error.
     :param min_convexity: a top face covering less of its convex hull than this is two
         footprints joined.
     :param level_gap: m: a second flat level this far below the top face is a second object's top.
-    :param square_difference: m: a box whose measured top sides differ by less than this is square.
-    :param depth_jump: m: neighbouring pixels further apart in depth are two things, one in front
-        of the other.
-    :param min_top: m^2, the smallest top face of any object.
     """
 
-    max_side: float
+    depth_jump: float
     side_tolerance: float
     min_convexity: float
     level_gap: float
-    square_difference: float
-    depth_jump: float = 0.02
-    min_top: float = 0.0009
+
+    def check(self, source: str) -> None:
+        """Refuse thresholds that would cut or refuse everything (called by :func:`fr5_rl.config.typed`)."""
+        if not (self.depth_jump > 0 and self.side_tolerance >= 0 and 0 < self.min_convexity <= 1
+                and self.level_gap > 0):
+            raise ConfigError(f"{source}: needs depth_jump > 0, side_tolerance >= 0, 0 < min_convexity <= 1 "
+                              "and level_gap > 0")
 
     @classmethod
-    def from_objects(cls, variety, rectangular_min_difference: float, side_tolerance: float = 0.01,
-                     min_convexity: float = 0.92, level_gap: float = 0.01) -> "SceneLimits":
+    def from_yaml(cls, path_or_name: Union[str, Path] = "detector") -> "SceneDetectorSettings":
+        """The ``scene`` section of ``config/detector.yaml`` (or of another file), checked."""
+        return load_section(cls, "scene", path_or_name)
+
+
+@dataclass(frozen=True)
+class SceneLimits:
+    """What one object can look like: the objects a cell handles and the detector's thresholds.
+
+    :param max_side: m, the longest top side (or diameter) of any object; a wider top face is
+        several objects.
+    :param min_top: m^2, the smallest top face of any object.
+    :param square_difference: m: a box whose measured top sides differ by less than this is square.
+    :param settings: the thresholds (:class:`SceneDetectorSettings`).
+    """
+
+    max_side: float
+    min_top: float
+    square_difference: float
+    settings: SceneDetectorSettings
+
+    @classmethod
+    def from_objects(cls, variety, rectangular_min_difference: float,
+                     settings: Optional[SceneDetectorSettings] = None) -> "SceneLimits":
         """The limits of ``object.variety`` (:class:`fr5_rl.env_config` ``VarietyConfig``): the
-        longest side of its boxes or diameter of its cylinders; square below half the difference
-        an oblong box's sides keep (``config/scenes.yaml`` ``rectangular_min_difference``)."""
+        longest side of its boxes or diameter of its cylinders, the smallest top; square below half
+        the difference an oblong box's sides keep (``config/scenes.yaml`` ``rectangular_min_difference``).
+
+        :param settings: the thresholds; None: ``config/detector.yaml``'s.
+        """
         longest = max(float(variety.box_side[1]), 2.0 * float(variety.cylinder_radius[1]))
         smallest = min(float(variety.box_side[0]) ** 2, math.pi * float(variety.cylinder_radius[0]) ** 2)
-        return cls(longest, side_tolerance, min_convexity, level_gap, 0.5 * rectangular_min_difference,
-                   min_top=smallest)
+        return cls(longest, smallest, 0.5 * rectangular_min_difference,
+                   settings if settings is not None else SceneDetectorSettings.from_yaml())
 
 
 @dataclass(frozen=True)
@@ -119,7 +147,7 @@ def detect_scene(detector: ObjectDetector, limits: SceneLimits, depth: np.ndarra
     :param intrinsics: the image's camera model.
     :param table_from_optical: 4x4 pose (m) of the optical frame in the table frame.
     """
-    pieces = detector.segment(depth, intrinsics, table_from_optical, depth_jump=limits.depth_jump)
+    pieces = detector.segment(depth, intrinsics, table_from_optical, depth_jump=limits.settings.depth_jump)
     found, refused = [], []
     for index in pieces.occluded:
         refused.append(RefusedPiece(RefusalReason.OCCLUDED, "hidden by or touching the robot", _centre(pieces, index)))
@@ -158,19 +186,20 @@ def label_of(detection: Detection, limits: SceneLimits) -> str:
 def _several(pieces: Pieces, index: np.ndarray, detection: Detection, limits: SceneLimits,
              top_tolerance: float, table_height: float) -> Optional[str]:
     """Why the piece is more than one object, or None."""
+    settings = limits.settings
     widest = max(detection.extents)
-    if widest > limits.max_side + limits.side_tolerance:
+    if widest > limits.max_side + settings.side_tolerance:
         return (f"a top face {widest * 100:.1f} cm across, wider than any object "
                 f"({limits.max_side * 100:.1f} cm): objects touching")
     heights = pieces.height.ravel()[index]
     x, y = pieces.px.ravel()[index], pieces.py.ravel()[index]
     top = heights >= np.percentile(heights, 90) - top_tolerance
     convexity = _convexity(x[top], y[top], _horizontal_areas(pieces, index[top], table_height))
-    if convexity < limits.min_convexity:
+    if convexity < settings.min_convexity:
         return f"a top face covering {convexity:.0%} of its outline: two footprints joined"
     # A second flat level well below the top face: another object's top (an object's own sides
     # are vertical, so their points spread over many heights and cover no area at any one).
-    below = heights < detection.top_height - limits.level_gap
+    below = heights < detection.top_height - settings.level_gap
     if below.sum() > 0:
         bins = np.round(heights[below] / LEVEL_BIN)
         values, counts = np.unique(bins, return_counts=True)

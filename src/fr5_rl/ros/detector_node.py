@@ -66,7 +66,7 @@ from ..perception.camera_model import Intrinsics
 from ..perception.detector import Detection, DetectorSettings, ObjectDetector, Refusal, RefusalReason, TableRegion
 from ..perception.images import InputError, check_frame, decode_color, decode_depth, intrinsics_from_camera_info
 from ..perception.overlay import draw_detection
-from ..perception.scene_detector import SceneLimits, detect_scene
+from ..perception.scene_detector import SceneDetectorSettings, SceneLimits, detect_scene
 from ..perception.scene_tracker import SceneTracker
 from ..scenes import SceneSettings
 from ..perception.tracker import ObjectTracker, TrackedObject, TrackerSettings, TrackState, rotation_z
@@ -91,6 +91,7 @@ class DetectorNodeParams:
         states) are still expected to come, not yet worth a warning.
     :param detector: the detector's thresholds, handed to it whole.
     :param tracker: the tracker's settings, handed to it whole.
+    :param scene: the thresholds of the report of every object (``~objects_topic``).
     :param joint_states_topics: sensor_msgs/JointState topics merged by joint name for the finger
         joints (the arm's driver and a gripper driver may publish apart).
     :param hand_check_rate: Hz at which, between frames, the tcp and the fingers alone are checked
@@ -119,6 +120,7 @@ class DetectorNodeParams:
     startup_grace: float
     detector: DetectorSettings
     tracker: TrackerSettings
+    scene: SceneDetectorSettings
     tcp_frame: str
     objects_topic: str
     objects_gate: float
@@ -266,7 +268,8 @@ class DetectorNode:
             from ..msg import DetectedObjects  # built by catkin from msg/
 
             self.scene_limits = SceneLimits.from_objects(load_env_config().object.variety,
-                                                         SceneSettings.from_yaml().rectangular_min_difference)
+                                                         SceneSettings.from_yaml().rectangular_min_difference,
+                                                         params.scene)
             self.objects_pub = rospy.Publisher(params.objects_topic, DetectedObjects, queue_size=1)
             self.scene_tracker = SceneTracker(params.objects_gate, params.tracker.hidden_timeout)
         for topic in params.joint_states_topics:

@@ -11,7 +11,7 @@ from typing import Sequence, Tuple
 
 from shape_msgs.msg import SolidPrimitive
 
-from ..objects import ObjectShape, shape_from_extents
+from ..objects import ObjectShape, quaternion_of_yaw, shape_from_extents
 
 
 def primitive_from_shape(shape: ObjectShape) -> SolidPrimitive:
@@ -49,8 +49,6 @@ def detected_objects_message(scene, ids: Sequence[int], stamp, frame_id: str):
     each object's id (``ids``, in the order of ``scene.objects``), its centre upright at its yaw
     and its shape, each refused piece's reason and place, in ``frame_id`` (the table frame the
     detector measures in) at ``stamp`` (the image's)."""
-    import math
-
     from ..msg import DetectedObject, DetectedObjects, RefusedPiece
 
     message = DetectedObjects()
@@ -60,7 +58,7 @@ def detected_objects_message(scene, ids: Sequence[int], stamp, frame_id: str):
         item = DetectedObject(id=track_id, kind=found.label)
         position, orientation = item.pose.position, item.pose.orientation
         position.x, position.y, position.z = detection.position_table
-        orientation.z, orientation.w = math.sin(0.5 * detection.yaw), math.cos(0.5 * detection.yaw)
+        orientation.x, orientation.y, orientation.z, orientation.w = quaternion_of_yaw(detection.yaw)
         if detection.shape is not None:
             item.shape = primitive_from_shape(detection.shape)
         message.objects.append(item)

@@ -1,7 +1,6 @@
 """Messages the simulator node publishes: joint states by name, and rviz markers of the scene."""
 from __future__ import annotations
 
-import math
 from typing import Iterable, Sequence, Tuple
 
 import rospy
@@ -9,6 +8,7 @@ from geometry_msgs.msg import Point
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ..objects import quaternion_of_yaw
 from ..sim.plant import JointStates, Pose, SceneDescription
 
 
@@ -68,5 +68,6 @@ def goal_marker(scene: SceneDescription, stamp: rospy.Time) -> Marker:
     goal.scale.z = 0.004  # a footprint on the table
     x, y, yaw = scene.goal
     goal.pose.position.x, goal.pose.position.y, goal.pose.position.z = x, y, scene.table_top_height + 0.002
-    goal.pose.orientation.z, goal.pose.orientation.w = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+    orientation = goal.pose.orientation
+    orientation.x, orientation.y, orientation.z, orientation.w = quaternion_of_yaw(yaw)
     return goal

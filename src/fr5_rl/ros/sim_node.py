@@ -67,6 +67,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ..config import ConfigError, whole_multiple
 from ..deploy.bundle import ModelFilesError, deployment_overrides, read_meta, resolve_model_dir, task_and_arm
 from ..episode_runner import EpisodeRunner, simulator_episode
+from ..objects import quaternion_of_yaw
 from ..observation import TASK_BLOCKS
 from ..sim.plant import JointStates
 from ..tasks import EpisodeVerdict
@@ -414,8 +415,7 @@ class SimulatorNode:
         if self.goal_pub is None or scene.goal is None:
             return
         x, y, yaw = scene.goal
-        goal_in_base = matrix_from_quaternion((x, y, scene.table_top_height),
-                                              (0.0, 0.0, np.sin(yaw / 2.0), np.cos(yaw / 2.0)))
+        goal_in_base = matrix_from_quaternion((x, y, scene.table_top_height), quaternion_of_yaw(yaw))
         goal_in_frame = self.base_in_goal_frame @ goal_in_base
         message = PoseStamped()
         message.header.stamp = rospy.Time.now()
