@@ -52,19 +52,22 @@ GRAPH = import_graph()
 # control, transforms: the shared layer) imports only the shared layer.
 ALLOWED = {
     # The simulator node runs an episode (plant, chain, task), not the gym environment.
-    "ros": {"ros", "deploy", "perception", "drivers", "shared", "episode", "episode_runner", "sim", "tasks"},
+    "ros": {"ros", "deploy", "perception", "drivers", "shared", "episode", "episode_runner", "scene_episodes", "sim",
+            "tasks"},
     "cli": {"training", "deploy", "shared", "envs", "expert", "sim", "tasks", "cli", "sim_to_real"},
     # Record, replay, compare and fit (compare_run.py, fit_driver.py): tools, never deployed.
     "sim_to_real": {"sim_to_real", "shared", "episode", "sim", "tasks"},
     "training": {"training", "deploy", "shared", "envs", "goal_env", "expert", "sim", "tasks"},
     # The rehearsal's chain in one process: the simulator (its world built as the node builds
     # it), the drivers and the deployed node's code.
-    "chain_emulation": {"shared", "episode", "episode_runner", "sim", "tasks", "deploy", "drivers"},
+    "chain_emulation": {"shared", "episode", "episode_runner", "scene_episodes", "sim", "tasks", "deploy", "drivers"},
     "deploy": {"deploy", "shared"},
     "perception": {"perception", "shared"},
     "drivers": {"drivers", "shared"},
     # The simulator node's episodes without ROS: phases, commands, records.
-    "episode_runner": {"shared", "episode", "sim", "tasks"},
+    "episode_runner": {"shared", "episode", "scene_episodes", "sim", "tasks"},
+    # Clearing a table in the simulator: a scene's objects, one episode each.
+    "scene_episodes": {"shared", "episode", "tasks"},
     # The place task in the goal-conditioned API (HER), around the gym environment.
     "goal_env": {"shared", "envs"},
     # gymnasium's API around one episode.
@@ -80,7 +83,7 @@ ALLOWED = {
     "shared": {"shared"},
 }
 SHARED = {"config", "env_config", "kinematics", "observation", "control", "transforms", "gripper", "motion_guard",
-          "help_text", "draws", "objects", "scenes", "fr5_rl"}
+          "help_text", "draws", "objects", "scenes", "clearing", "fr5_rl"}
 
 
 def kind(module: str) -> str:

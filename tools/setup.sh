@@ -99,7 +99,7 @@ fi
 [ -d "$repo/.catkin_ws" ] && { log "removing the old in-package workspace $repo/.catkin_ws"; rm -rf "$repo/.catkin_ws"; }
 mkdir -p "$ws/src"
 [ "$(readlink "$ws/src/fr5_rl" 2>/dev/null)" = "$repo" ] || ln -sfn "$repo" "$ws/src/fr5_rl"
-build_hash=$(cat package.xml CMakeLists.txt setup.py msg/*.msg | sha1sum | cut -c1-12)
+build_hash=$(cat package.xml CMakeLists.txt setup.py msg/*.msg srv/*.srv | sha1sum | cut -c1-12)
 if [ ! -f "$stamps/catkin-$build_hash" ] || [ ! -f "$ws/devel/setup.bash" ]; then
   log "building catkin workspace $ws"
   (

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -19,7 +19,8 @@ from .control_chain import ControlChain
 from .draws import EpisodeDraws, draw_episode, draw_place
 from .env_config import EnvConfig, load_env_config
 from .kinematics import ForwardKinematics
-from .objects import yaw_of
+from .objects import ObjectShape, yaw_of
+from .scenes import EpisodeScene
 from .transforms import matrix_from_quaternion
 from .observation import ActionHistory, ObservationBuilder, goal_features, object_features
 from .sim.plant import JointStates, Measurement, Plant, Pose, SceneDescription
@@ -78,19 +79,26 @@ class Episode:
         :param rng: the generator every draw comes from.
         :param options: ``object_xy`` (m, base_link) places the object there; ``arm_positions``
             (rad, j1 .. j6) keeps the arm there instead of a start drawn around home (the
-            draws are made either way, so a seed places the same object).
+            draws are made either way, so a seed places the same object); ``scene``
+            (:class:`fr5_rl.scenes.EpisodeScene`): the object is that scene's target, with its goal,
+            and its other objects stand around it (the other draws are made as ever).
         :return: the task's state and the policy's observation at the start.
         """
         options = options or {}
+        scene: Optional[EpisodeScene] = options.get("scene")
         self.draws = draws = draw_episode(rng, self.cfg, self.robot_spec, self.task.name, self._physics_dt,
                                           self.chain.bridge_periods, self.chain.guard_available,
-                                          options.get("object_xy"))
+                                          options.get("object_xy") if scene is None else scene.target.position[:2])
+        if scene is not None:
+            self.draws = draws = scene.draws_for(draws)
         keep_arm = "arm_positions" in options
         start = (finite_values(options["arm_positions"], 6, "options['arm_positions']") if keep_arm
                  else draws.start_joint_positions)
         start = np.clip(start, self.robot_spec.lower_limits, self.robot_spec.upper_limits)
         self.object_start = self.plant.build_scene(draws, start, self.control_dt)
-        if keep_arm and "object_xy" not in options:
+        self.plant.set_neighbours(() if scene is None else [
+            (other.shape, other.mass, draws.object_friction, other.position, other.quaternion) for other in scene.others])
+        if keep_arm and "object_xy" not in options and scene is None:
             self._place_clear_of_arm(rng)
         self.chain.begin(draws, start, self.plant.physics_dt, self.plant.substeps)
         for part in (self.shaper, self.action_history, self.task):
@@ -261,6 +269,15 @@ class Episode:
     def object_pose(self) -> Pose:
         """The object's pose in base_link (ground truth)."""
         return self.plant.object_pose()
+
+    def neighbour_poses(self) -> List[Pose]:
+        """Where a scene's other objects are now (ground truth, base_link), in the scene's order."""
+        return self.plant.neighbour_poses()
+
+    @property
+    def neighbour_shapes(self) -> List[ObjectShape]:
+        """A scene's other objects' kinds and sizes, in the scene's order."""
+        return self.plant.neighbour_shapes
 
     def scene(self) -> SceneDescription:
         """The table, this episode's object and its goal (no simulator query)."""

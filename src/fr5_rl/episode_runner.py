@@ -32,6 +32,7 @@ import numpy as np
 from .config import deep_update
 from .env_config import load_env_config
 from .episode import Episode, placement_record
+from .scene_episodes import TableClearing
 from .sim.node_params import SimNodeParams
 from .sim.pacing import ArrivalQueue
 from .sim.servo import DriverModel
@@ -82,11 +83,14 @@ class EpisodeRunner:
         is placed, and the policy node's start move brings the arm to its start.
     :param hold_after_episode: s the arm holds still after an episode (``~pause_between_episodes``).
     :param clock: monotonic s (injected so the phases are tested without sleeping).
+    :param clearing: a clearing run (:class:`~fr5_rl.scene_episodes.TableClearing`): each episode is
+        the next object of a scene of several; None: one object an episode.
     """
 
     def __init__(self, sim: Episode, driver: DriverModel, seed: int, go_to_start: bool, hold_after_episode: float,
-                 clock: Callable[[], float] = time.monotonic) -> None:
-        self.sim, self.driver, self.seed = sim, driver, seed
+                 clock: Callable[[], float] = time.monotonic, clearing: Optional[TableClearing] = None) -> None:
+        self.sim, self.driver, self.seed, self.clearing = sim, driver, seed, clearing
+        self.extra_records: List[Dict[str, Any]] = []  # clearing: the last episode's knocked-over objects' records
         self.go_to_start, self.hold_after_episode, self.clock = go_to_start, hold_after_episode, clock
         self.max_width = sim.robot_spec.max_opening_width
         self.lower, self.upper = sim.robot_spec.lower_limits, sim.robot_spec.upper_limits
@@ -142,10 +146,12 @@ class EpisodeRunner:
             (the caller then calls :meth:`begin`).
         """
         seed = self.seed + self.episode
+        options: Dict[str, Any] = {}
+        if self.clearing is not None:
+            options["scene"] = self.clearing.next_scene()
         if self.next_start_keeps_the_arm:
-            self.sim.start(seed, options={"arm_positions": self.sim.joint_positions().tolist()})
-        else:
-            self.sim.start(seed)
+            options["arm_positions"] = self.sim.joint_positions().tolist()
+        self.sim.start(seed, options=options or None)
         self.arm_command = None
         self.arriving.clear()
         self.gripper_arriving.clear()
@@ -183,12 +189,21 @@ class EpisodeRunner:
         :return: the record (episode, seed, success, failure, steps, sim_time, where the object
             started and its kind (:func:`placement_record`), and the timing).
         """
+        clearing_fields: Dict[str, Any] = {}
+        if self.clearing is not None:
+            verdict, clearing_fields = self.clearing.finish(self.sim, verdict)
         self.episode += 1
         self.results.append(bool(verdict.success))
         record: Dict[str, Any] = {
             "episode": self.episode, "seed": self.seed + self.episode - 1, "success": bool(verdict.success),
             "failure": verdict.failure or "", "steps": verdict.steps, "sim_time": round(sim_time, 3),
-            **placement_record(self.sim)}
+            **placement_record(self.sim), **clearing_fields}
+        self.extra_records = []
+        for extra in (self.clearing.extra_records if self.clearing is not None else ()):
+            # An object knocked over is one more object not placed: a record of its own.
+            self.episode += 1
+            self.results.append(False)
+            self.extra_records.append({"episode": self.episode, "seed": self.seed + self.episode - 1, **extra})
         if lockstep:
             record["late_periods"] = self.late_periods
         elif self.loop_lateness:

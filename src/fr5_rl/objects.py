@@ -56,6 +56,13 @@ class ObjectShape:
         return cls(kind, (2.0 * half_x, 2.0 * half_y, 2.0 * half_z))
 
     @property
+    def dims(self) -> Tuple[float, ...]:
+        """The simulator's dimensions (:meth:`from_dims`): (radius, height) of a cylinder, the
+        half extents of a box."""
+        x, y, z = self.size
+        return (0.5 * x, z) if self.kind == "cylinder" else (0.5 * x, 0.5 * y, 0.5 * z)
+
+    @property
     def symmetry_order(self) -> int:
         """How many times the top repeats in a turn: 0 (a cylinder, any yaw), 4 (a square), 2."""
         if self.kind == "cylinder":

@@ -11,17 +11,18 @@ and the benches compare a detector's findings with :class:`SceneObject`. Setting
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import List, Optional, Tuple, Union
+from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from .config import ConfigError, load_typed
-from .draws import draw_object
+from .draws import EpisodeDraws, draw_object
 from .env_config import EnvConfig
-from .objects import ObjectShape, quaternion_of_yaw
+from .objects import ObjectShape, quaternion_of_yaw, yaw_of
 
 
 @dataclass(frozen=True)
@@ -97,8 +98,68 @@ class SceneObject:
     @property
     def dims(self) -> Tuple[float, ...]:
         """The simulator's dimensions: (radius, height) of a cylinder, half extents of a box."""
-        x, y, z = self.shape.size
-        return (0.5 * x, z) if self.shape.kind == "cylinder" else (0.5 * x, 0.5 * y, 0.5 * z)
+        return self.shape.dims
+
+
+@dataclass(frozen=True)
+class StandingBody:
+    """An object of a scene as it stands now (upright or not).
+
+    :param shape: its kind and extents (m) along its own x, y, z.
+    :param mass: kg.
+    :param position: its centre (m, base_link).
+    :param quaternion: (x, y, z, w), base_link.
+    """
+
+    shape: ObjectShape
+    mass: float
+    position: Tuple[float, float, float]
+    quaternion: Tuple[float, float, float, float]
+
+    @classmethod
+    def of(cls, scene_object: SceneObject) -> "StandingBody":
+        """A drawn object where it was drawn."""
+        return cls(scene_object.shape, scene_object.mass, scene_object.position, scene_object.quaternion)
+
+    @property
+    def label(self) -> str:
+        """``cylinder``, ``square box`` or ``rectangular box``."""
+        return self.shape.label
+
+    @property
+    def up_z(self) -> float:
+        """The z component of its own z axis in base_link (1: upright, 0: on its side)."""
+        x, y, _, _ = self.quaternion
+        return 1.0 - 2.0 * (x * x + y * y)
+
+    def moved(self, position: Sequence[float], quaternion: Sequence[float]) -> "StandingBody":
+        """The same object at a new pose."""
+        return dataclasses.replace(self, position=tuple(float(v) for v in position),
+                                   quaternion=tuple(float(v) for v in quaternion))
+
+
+@dataclass(frozen=True)
+class EpisodeScene:
+    """One episode of a scene: the object to pick and set down, its goal, and the others.
+
+    :param target: the object the task judges (standing upright).
+    :param goal: where it goes: (x, y, yaw) in m, m, rad, base_link.
+    :param others: every other object, where it stands.
+    """
+
+    target: StandingBody
+    goal: Tuple[float, float, float]
+    others: Tuple[StandingBody, ...]
+
+    def draws_for(self, draws: EpisodeDraws) -> EpisodeDraws:
+        """An episode's draws with this scene's target and goal in place of the drawn object
+        and goal (every other draw, the arm's start and the chain's timing, as drawn)."""
+        target = self.target
+        return dataclasses.replace(
+            draws, object_shape=target.shape.kind, object_dims=target.shape.dims, object_mass=target.mass,
+            object_rest_z=float(target.position[2]), object_size_scale=1.0,
+            object_xy=(float(target.position[0]), float(target.position[1])),
+            object_yaw=yaw_of(target.quaternion), goal=tuple(float(v) for v in self.goal))
 
 
 def draw_shape(rng: np.random.Generator, cfg: EnvConfig, settings: SceneSettings) -> Tuple[ObjectShape, float]:
@@ -113,8 +174,10 @@ def draw_shape(rng: np.random.Generator, cfg: EnvConfig, settings: SceneSettings
 
 
 def draw_scene(rng: np.random.Generator, cfg: EnvConfig, settings: SceneSettings,
-               count: Optional[int] = None) -> List[SceneObject]:
-    """A scene: ``count`` objects (default: drawn from ``settings.count``) in ``object.region_*``.
+               count: Optional[int] = None,
+               region: Optional[Tuple[Sequence[float], Sequence[float]]] = None) -> List[SceneObject]:
+    """A scene: ``count`` objects (default: drawn from ``settings.count``) in ``region``
+    (``(low, high)`` corners, m, base_link; default ``object.region_*``).
 
     Each object is drawn at a uniform position and yaw until its footprint keeps ``min_gap`` from
     every other one (``attempts`` tries; then the scene has fewer objects). With
@@ -127,7 +190,8 @@ def draw_scene(rng: np.random.Generator, cfg: EnvConfig, settings: SceneSettings
     """
     if count is None:
         count = int(rng.integers(settings.count[0], settings.count[1] + 1))
-    low, high = np.asarray(cfg.object.region_low, dtype=float), np.asarray(cfg.object.region_high, dtype=float)
+    low, high = region if region is not None else (cfg.object.region_low, cfg.object.region_high)
+    low, high = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
     table_top = cfg.table.top_height
     scene: List[SceneObject] = []
     for _ in range(count):

@@ -44,7 +44,7 @@ import rospy
 import tf2_ros
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Float64MultiArray
-from visualization_msgs.msg import Marker
+from visualization_msgs.msg import Marker, MarkerArray
 
 from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec
 from ..env_config import load_env_config
@@ -118,6 +118,7 @@ class CameraNodeParams:
     idle: bool
     joint_states_topic: str
     object_topic: str
+    neighbours_topic: str
     color_topic: str
     depth_topic: str
     camera_info_topic: str
@@ -209,6 +210,9 @@ class CameraNode:
         self.timing_pub = rospy.Publisher("~timing", Float64MultiArray, queue_size=10)
         rospy.Subscriber(params.joint_states_topic, JointState, self.on_joint_state, queue_size=5, tcp_nodelay=True)
         rospy.Subscriber(params.object_topic, Marker, self.on_object, queue_size=5, tcp_nodelay=True)
+        self.neighbours: Optional[List[Marker]] = None  # a scene's other objects, newest (None: no scene)
+        if params.neighbours_topic:
+            rospy.Subscriber(params.neighbours_topic, MarkerArray, self.on_neighbours, queue_size=5, tcp_nodelay=True)
         rospy.loginfo(f"camera_node: {params.width}x{params.height} at up to {params.rate:g} Hz, "
                       f"{self.camera.renderer} renderer, frame {params.frame_id}, "
                       f"{'publishing' if params.publish_tf else 'not publishing'} its tf, niceness {params.nice}"
@@ -221,6 +225,10 @@ class CameraNode:
     def on_object(self, message: Marker) -> None:
         with self.lock:
             self.object = message
+
+    def on_neighbours(self, message: MarkerArray) -> None:
+        with self.lock:
+            self.neighbours = [marker for marker in message.markers if marker.action == Marker.ADD]
 
     def snapshot(self) -> Optional[Tuple[int, Dict[str, float], Marker]]:
         """The newest object pose and the joint state of the same stamp (or the newest one)."""
@@ -248,14 +256,13 @@ class CameraNode:
     def publish_frame(self, stamp_ns: int, joints: Dict[str, float], obj: Marker) -> None:
         """Render the scene at one instant and publish colour, depth and both CameraInfos."""
         self.rendered_stamp = stamp_ns
-        if obj.type == Marker.CYLINDER:
-            shape, dims = "cylinder", (obj.scale.x / 2.0, obj.scale.z)
-        else:  # a box of any proportions: its three half extents
-            shape, dims = "box", (obj.scale.x / 2.0, obj.scale.y / 2.0, obj.scale.z / 2.0)
-        pose = obj.pose
         self.camera.set_joints(joints)
-        self.camera.set_object(shape, dims, (pose.position.x, pose.position.y, pose.position.z),
-                               (pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w))
+        with self.lock:
+            neighbours = None if self.neighbours is None else list(self.neighbours)
+        if neighbours is not None:  # a scene: the object and the others, each its own body
+            self.camera.set_objects([body_of_marker(marker) for marker in [obj] + neighbours])
+        else:
+            self.camera.set_object(*body_of_marker(obj))
         started = time.perf_counter()
         rgb, depth = self.camera.render()
         rendered = time.perf_counter()
@@ -272,6 +279,19 @@ class CameraNode:
         self.timing_pub.publish(Float64MultiArray(data=[rendered - started, converted - rendered, published - converted,
                                                         rospy.Time.now().to_sec() - stamp.to_sec()]))
         self.frames += 1
+
+
+def body_of_marker(marker: Marker) -> Tuple[str, Tuple[float, ...], Tuple[float, float, float],
+                                             Tuple[float, float, float, float]]:
+    """``(shape, dims, position, quaternion)`` of an object's marker, as the simulated camera
+    places bodies: a CYLINDER's (radius, height), a box's three half extents (m, base_link)."""
+    if marker.type == Marker.CYLINDER:
+        shape, dims = "cylinder", (marker.scale.x / 2.0, marker.scale.z)
+    else:  # a box of any proportions
+        shape, dims = "box", (marker.scale.x / 2.0, marker.scale.y / 2.0, marker.scale.z / 2.0)
+    position, orientation = marker.pose.position, marker.pose.orientation
+    return (shape, dims, (position.x, position.y, position.z),
+            (orientation.x, orientation.y, orientation.z, orientation.w))
 
 
 def main() -> int:

@@ -58,6 +58,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from shape_msgs.msg import SolidPrimitive
 from std_msgs.msg import Float64, Float64MultiArray, String
+from visualization_msgs.msg import MarkerArray
 
 from ..config import ConfigError, load_robot_spec
 from ..deploy.joint_state import JointStateReader
@@ -68,13 +69,15 @@ from ..perception.images import InputError, check_frame, decode_color, decode_de
 from ..perception.overlay import draw_detection
 from ..perception.scene_detector import SceneDetectorSettings, SceneLimits, detect_scene
 from ..perception.scene_tracker import SceneTracker
+from ..perception.target_selection import SceneTargetTracker, Selection
+from ..clearing import ClearingSettings
 from ..scenes import SceneSettings
 from ..perception.tracker import ObjectTracker, TrackedObject, TrackerSettings, TrackState, rotation_z
 from ..transforms import matrix_from_quaternion, quaternion_from_matrix
 from .images import image_message
 from .params import exit_if_help_asked, node_parameters
 from .lifetime import init_node
-from .object_messages import detected_objects_message, primitive_from_shape
+from .object_messages import detected_objects_message, detected_object_markers, primitive_from_shape
 
 TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.ExtrapolationException,
              tf2_ros.InvalidArgumentException)
@@ -106,6 +109,16 @@ class DetectorNodeParams:
         policy node's and the gripper bridge's); "" when none: a held object whose grip widens by
         ``tracker/release_opening`` then counts as let go, also while the fingers are told to
         close (an off-centre grip turning square between the pads widens by 5-6 mm).
+    :param selection_rule: "": one object on the table (a second one is refused); ``nearest``,
+        ``kind`` or ``id`` (``clearing``: config/clearing.yaml's ``rule``): the target is one
+        object of a scene, chosen by that rule
+        (:class:`fr5_rl.perception.target_selection.SceneTargetTracker`, config/clearing.yaml),
+        changed at run time through ``~select`` (fr5_rl/SelectObject).
+    :param selection_kind: rule ``kind``: only this kind; "": clearing.yaml's ``kind_order``.
+    :param selection_gate: m: with a selection, the detection of the target's kind nearest where
+        it is believed, this near, is the target.
+    :param object_markers_topic: visualization_msgs/MarkerArray of every object reported on
+        ``~objects_topic`` (the chosen one drawn green, with its id), for rviz; "" off.
     """
 
     color_topic: str
@@ -128,8 +141,19 @@ class DetectorNodeParams:
     track_state_topic: str
     hand_check_rate: float
     gripper_command_topic: str
+    selection_rule: str = ""
+    selection_kind: str = ""
+    selection_gate: float = 0.04
+    object_markers_topic: str = ""
 
     def check(self, source: str) -> None:
+        if self.selection_rule and self.selection_rule != "clearing":
+            try:
+                Selection(self.selection_rule, self.selection_kind, 1).check()
+            except ValueError as error:
+                raise ConfigError(f"{source}: selection_rule/selection_kind: {error}") from None
+        if self.selection_gate <= 0:
+            raise ConfigError(f"{source}: 'selection_gate' must be > 0 m, got {self.selection_gate}")
         if self.hand_check_rate < 0:
             raise ConfigError(f"{source}: 'hand_check_rate' must be >= 0 Hz (0: off), got {self.hand_check_rate}")
         if self.sync_slop <= 0 or self.max_image_age <= 0:
@@ -263,15 +287,26 @@ class DetectorNode:
         self.debug_pub = rospy.Publisher(params.debug_image_topic, Image, queue_size=1)
         self.state_pub = rospy.Publisher(params.track_state_topic, String, queue_size=1)
         self.timing_pub = rospy.Publisher("~timing", Float64MultiArray, queue_size=10)
-        self.objects_pub = None
-        if params.objects_topic:
-            from ..msg import DetectedObjects  # built by catkin from msg/
-
+        self.objects_pub = self.markers_pub = self.selector = None
+        if params.objects_topic or params.selection_rule:
             self.scene_limits = SceneLimits.from_objects(load_env_config().object.variety,
                                                          SceneSettings.from_yaml().rectangular_min_difference,
                                                          params.scene)
-            self.objects_pub = rospy.Publisher(params.objects_topic, DetectedObjects, queue_size=1)
             self.scene_tracker = SceneTracker(params.objects_gate, params.tracker.hidden_timeout)
+        if params.objects_topic:
+            from ..msg import DetectedObjects  # built by catkin from msg/
+
+            self.objects_pub = rospy.Publisher(params.objects_topic, DetectedObjects, queue_size=1)
+            if params.object_markers_topic:
+                self.markers_pub = rospy.Publisher(params.object_markers_topic, MarkerArray, queue_size=1)
+        if params.selection_rule:
+            from ..srv import SelectObject  # built by catkin from srv/
+
+            clearing = ClearingSettings.from_yaml()
+            rule = clearing.rule if params.selection_rule == "clearing" else params.selection_rule
+            self.selector = SceneTargetTracker(self.tracker, self.scene_tracker, clearing, params.selection_gate,
+                                               Selection(rule, params.selection_kind, 1))
+            rospy.Service("~select", SelectObject, self.on_select)
         for topic in params.joint_states_topics:
             rospy.Subscriber(topic, JointState, self.on_joint_state, queue_size=10, tcp_nodelay=True)
         if params.gripper_command_topic:
@@ -366,11 +401,15 @@ class DetectorNode:
             decoded = time.perf_counter()
             result = check_frame(rgb, depth_m, intrinsics, stamp.to_sec(), rospy.Time.now().to_sec(),
                                  self.params.max_image_age, self.params.detector.min_valid_depth_fraction)
-            if result is None:
-                result = self.detect(rgb, depth_m, intrinsics, color)
-                self.report_every_object(depth_m, intrinsics, color)
-            detected = time.perf_counter()
-            result = self.track(result, depth_m, intrinsics, stamp)
+            if result is None and self.selector is not None:
+                result = self.choose_and_track(depth_m, intrinsics, color)
+                detected = time.perf_counter()
+            else:
+                if result is None:
+                    result = self.detect(rgb, depth_m, intrinsics, color)
+                    self.report_every_object(depth_m, intrinsics, color)
+                detected = time.perf_counter()
+                result = self.track(result, depth_m, intrinsics, stamp)
         tracked = time.perf_counter()
         if isinstance(result, TrackedObject):
             self.publish_target(result, color.header.stamp, color.header.frame_id)
@@ -381,6 +420,47 @@ class DetectorNode:
         if rgb is not None and self.debug_pub.get_num_connections() > 0:
             drawn = draw_detection(rgb, result, intrinsics, self.table_from_optical)
             self.debug_pub.publish(image_message(drawn, "rgb8", color.header.stamp, color.header.frame_id))
+
+    def on_select(self, request):
+        """``~select`` (fr5_rl/SelectObject): the rule the next object is chosen by."""
+        from ..srv import SelectObjectResponse
+
+        try:
+            selection = Selection(request.rule, request.kind, int(request.id))
+            with self.tracker_lock:
+                message = self.selector.select(selection)
+        except ValueError as error:
+            return SelectObjectResponse(success=False, message=str(error))
+        rospy.loginfo(f"detector_node: selection {message}")
+        return SelectObjectResponse(success=True, message=message)
+
+    def choose_and_track(self, depth_m: np.ndarray, intrinsics: Intrinsics, color: Image) -> Union[TrackedObject, Refusal]:
+        """With a selection: every object of the frame, the chosen one followed by the tracker
+        (:class:`~fr5_rl.perception.target_selection.SceneTargetTracker`), and the report of
+        them all on ``~objects_topic``."""
+        try:
+            transform = self.tf_buffer.lookup_transform(self.params.table_frame, color.header.frame_id, rospy.Time(0))
+        except TF_ERRORS as error:
+            return Refusal(RefusalReason.NO_TRANSFORM, f"{color.header.frame_id} -> {self.params.table_frame}: {error}")
+        t, r = transform.transform.translation, transform.transform.rotation
+        self.table_from_optical = matrix_from_quaternion((t.x, t.y, t.z), (r.x, r.y, r.z, r.w))
+        scene = detect_scene(self.detector, self.scene_limits, depth_m, intrinsics, self.table_from_optical)
+        stamp = color.header.stamp
+        tcp, width = self.tcp_at(stamp), self.widths.at(stamp.to_sec())
+        with self.tracker_lock:
+            frame = self.selector.update(scene, stamp.to_sec(), depth_m, intrinsics, self.table_from_optical, tcp,
+                                         width, self.commanded.at(stamp.to_sec()))
+        self.publish_objects(scene, [track_id for track_id, _ in frame.objects], frame.chosen_id, stamp)
+        return frame.target
+
+    def publish_objects(self, scene, ids: List[int], chosen_id: int, stamp: rospy.Time) -> None:
+        """The report of every object (and its rviz markers), to whoever subscribes."""
+        if self.objects_pub is not None and self.objects_pub.get_num_connections() > 0:
+            message = detected_objects_message(scene, ids, stamp, self.params.table_frame)
+            message.chosen_id = chosen_id
+            self.objects_pub.publish(message)
+        if self.markers_pub is not None and self.markers_pub.get_num_connections() > 0:
+            self.markers_pub.publish(detected_object_markers(scene, ids, chosen_id, stamp, self.params.table_frame))
 
     def track(self, result: Union[Detection, Refusal], depth_m: np.ndarray, intrinsics: Intrinsics,
               stamp: rospy.Time) -> Union[TrackedObject, Refusal]:
@@ -417,11 +497,13 @@ class DetectorNode:
     def report_every_object(self, depth_m: np.ndarray, intrinsics: Intrinsics, color: Image) -> None:
         """Every object the frame shows whole, and every piece refused, on ``~objects_topic``
         (only while something subscribes: it is a second look at the frame)."""
-        if self.objects_pub is None or self.objects_pub.get_num_connections() == 0 or self.table_from_optical is None:
+        if self.objects_pub is None or self.table_from_optical is None or (
+                self.objects_pub.get_num_connections() == 0
+                and (self.markers_pub is None or self.markers_pub.get_num_connections() == 0)):
             return
         scene = detect_scene(self.detector, self.scene_limits, depth_m, intrinsics, self.table_from_optical)
         ids = [track_id for track_id, _ in self.scene_tracker.update(scene, color.header.stamp.to_sec())]
-        self.objects_pub.publish(detected_objects_message(scene, ids, color.header.stamp, self.params.table_frame))
+        self.publish_objects(scene, ids, 0, color.header.stamp)
 
     def publish_target(self, tracked: TrackedObject, stamp: rospy.Time, optical_frame: str) -> None:
         """:param stamp: the frame's capture time (or now, between frames).

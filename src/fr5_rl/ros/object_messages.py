@@ -67,3 +67,53 @@ def detected_objects_message(scene, ids: Sequence[int], stamp, frame_id: str):
         refused.position.x, refused.position.y, refused.position.z = piece.position_table
         message.refused.append(refused)
     return message
+
+
+def detected_object_markers(scene, ids: Sequence[int], chosen_id: int, stamp, frame_id: str):
+    """``visualization_msgs/MarkerArray`` of one frame's objects for rviz: each one's measured
+    shape at its pose (the chosen one green, the others blue), its id and kind above it, and each
+    refused piece as a red sphere with its reason. Markers live 0.5 s: a frame that no longer
+    shows an object leaves no ghost of it."""
+    import rospy
+    from visualization_msgs.msg import Marker, MarkerArray
+
+    lifetime = rospy.Duration(0.5)
+    markers = [Marker(action=Marker.DELETEALL)]
+
+    def marker(kind: int, namespace: str, number: int, rgba: Tuple[float, float, float, float]) -> Marker:
+        item = Marker(type=kind, action=Marker.ADD, ns=namespace, id=number, lifetime=lifetime)
+        item.header.stamp, item.header.frame_id = stamp, frame_id
+        item.color.r, item.color.g, item.color.b, item.color.a = rgba
+        item.pose.orientation.w = 1.0
+        return item
+
+    for track_id, found in zip(ids, scene.objects):
+        detection, shape = found.detection, found.detection.shape
+        chosen = track_id == chosen_id
+        rgba = (0.15, 0.85, 0.25, 0.8) if chosen else (0.2, 0.45, 0.95, 0.6)
+        body = marker(Marker.CYLINDER if detection.kind == "cylinder" else Marker.CUBE, "detected", track_id, rgba)
+        x, y, z = detection.position_table
+        body.pose.position.x, body.pose.position.y, body.pose.position.z = x, y, z
+        orientation = body.pose.orientation
+        orientation.x, orientation.y, orientation.z, orientation.w = quaternion_of_yaw(detection.yaw)
+        if shape is not None:
+            body.scale.x, body.scale.y, body.scale.z = shape.size
+        else:
+            body.scale.x = body.scale.y = body.scale.z = max(detection.size, 0.01)
+        text = marker(Marker.TEXT_VIEW_FACING, "detected_label", track_id, (1.0, 1.0, 1.0, 1.0))
+        text.pose.position.x, text.pose.position.y = x, y
+        text.pose.position.z = z + 0.5 * body.scale.z + 0.03
+        text.scale.z = 0.025
+        text.text = f"{'> ' if chosen else ''}{track_id} {found.label}"
+        markers += [body, text]
+    for number, piece in enumerate(scene.refused):
+        sphere = marker(Marker.SPHERE, "refused", number, (0.95, 0.15, 0.1, 0.8))
+        sphere.pose.position.x, sphere.pose.position.y, sphere.pose.position.z = piece.position_table
+        sphere.scale.x = sphere.scale.y = sphere.scale.z = 0.02
+        text = marker(Marker.TEXT_VIEW_FACING, "refused_label", number, (0.95, 0.3, 0.2, 1.0))
+        text.pose.position.x, text.pose.position.y = piece.position_table[0], piece.position_table[1]
+        text.pose.position.z = piece.position_table[2] + 0.04
+        text.scale.z = 0.02
+        text.text = piece.reason.name
+        markers += [sphere, text]
+    return MarkerArray(markers=markers)

@@ -15,7 +15,6 @@ from ..config import whole_multiple
 from ..episode_runner import Phase
 from ..tasks import EpisodeVerdict
 from ..sim.pacing import AlignedStepSchedule, StepSchedule, TimeSchedule, WallClockPacer
-from .sim_messages import scene_markers
 
 
 class RealTimeLoop:
@@ -73,7 +72,7 @@ class RealTimeLoop:
                     if node.target_pub is not None and camera.due(pacer.sim_time):
                         node.target_pub.publish(node.camera_message(stamp))
                     if markers.due(pacer.sim_time):
-                        node.marker_pub.publish(scene_markers(sim.scene(), sim.object_pose(), runner.tcp_path, stamp))
+                        node.publish_markers(stamp)
             try:
                 rate.sleep()
             except rospy.ROSInterruptException:
@@ -127,8 +126,7 @@ class LockstepLoop:
             with node.lock:
                 if now_ns >= next_marker_ns:
                     next_marker_ns = now_ns + marker_period_ns
-                    node.marker_pub.publish(scene_markers(sim.scene(), sim.object_pose(), runner.tcp_path,
-                                                          rospy.Time(0, now_ns)))
+                    node.publish_markers(rospy.Time(0, now_ns))
                 self._open_period(now_ns)
                 arrived = node.command_arrived.wait_for(self._period_commanded,
                                                         timeout=params.lockstep_command_timeout)

@@ -8,7 +8,7 @@ from geometry_msgs.msg import Point
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..objects import quaternion_of_yaw
+from ..objects import ObjectShape, quaternion_of_yaw
 from ..sim.plant import JointStates, Pose, SceneDescription
 
 
@@ -71,3 +71,20 @@ def goal_marker(scene: SceneDescription, stamp: rospy.Time) -> Marker:
     orientation = goal.pose.orientation
     orientation.x, orientation.y, orientation.z, orientation.w = quaternion_of_yaw(yaw)
     return goal
+
+
+def neighbour_markers(shapes: Sequence[ObjectShape], poses: Sequence[Pose], stamp: rospy.Time,
+                      frame_id: str) -> MarkerArray:
+    """A scene's other objects where they are now (namespace ``neighbours``, ids 0, 1, ...):
+    each one's shape, size (m) and pose; a DELETEALL first, so that one taken off the table goes."""
+    markers = [Marker(action=Marker.DELETEALL, ns="neighbours")]
+    for number, (shape, pose) in enumerate(zip(shapes, poses)):
+        item = _marker(Marker.CYLINDER if shape.kind == "cylinder" else Marker.CUBE, "neighbours",
+                       (0.2, 0.45, 0.9, 1.0), frame_id, stamp)
+        item.id = number
+        item.scale.x, item.scale.y, item.scale.z = shape.size
+        item.pose.position.x, item.pose.position.y, item.pose.position.z = pose.position
+        orientation = item.pose.orientation
+        orientation.x, orientation.y, orientation.z, orientation.w = pose.quaternion
+        markers.append(item)
+    return MarkerArray(markers=markers)

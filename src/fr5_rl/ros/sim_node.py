@@ -46,6 +46,7 @@ its callbacks and the episode bookkeeping both loops share; each loop is a class
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -66,7 +67,9 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ..config import ConfigError, whole_multiple
 from ..deploy.bundle import ModelFilesError, deployment_overrides, read_meta, resolve_model_dir, task_and_arm
+from ..clearing import ClearingSettings
 from ..episode_runner import EpisodeRunner, simulator_episode
+from ..scene_episodes import TableClearing, scene_sizes
 from ..objects import quaternion_of_yaw
 from ..observation import TASK_BLOCKS
 from ..sim.plant import JointStates
@@ -78,7 +81,7 @@ from ..transforms import load_static_transforms, matrix_from_quaternion, quatern
 from .params import exit_if_help_asked, node_parameters
 from .sim_loops import LockstepLoop, RealTimeLoop
 from .object_messages import primitive_from_shape
-from .sim_messages import joint_state_message, object_marker
+from .sim_messages import joint_state_message, neighbour_markers, object_marker, scene_markers
 from .lifetime import init_node
 
 
@@ -104,6 +107,17 @@ class SimulatorNode:
                               "model a servo cycle or response: set ~servo_rate 0 and "
                               "~response_time_constant_s [] (driver:=default) or ~lockstep false")
         self.sim = simulator_episode(task, robot, model_settings, params)
+        clearing = None
+        if params.scene == "clear":
+            if not TASK_BLOCKS[task][1]:
+                raise ConfigError(f"sim_node: scene: clear sets each object down at a goal: it needs a model of the "
+                                  f"task place, not {task}")
+            clearing = TableClearing(self.sim, ClearingSettings.from_yaml(), params.seed)
+            if params.scenes:
+                # Every object of a scene gets one record: N scenes are that many episodes.
+                sizes = scene_sizes(self.sim, clearing.settings, params.seed, params.scenes)
+                self.params = params = dataclasses.replace(params, episodes=sum(sizes))
+                rospy.loginfo(f"sim_node: clearing {params.scenes} scenes of {', '.join(map(str, sizes))} objects")
         self.spec = self.sim.robot_spec
         self.physics_dt = self.sim.physics_dt
         # Lockstep publishes once per control period instead.
@@ -137,7 +151,7 @@ class SimulatorNode:
         # ---- episode state, shared with the callbacks under the lock: the runner's phase,
         # commands and records (ROS-free), and this node's calls to the policy node.
         self.runner = EpisodeRunner(self.sim, self.driver, params.seed, params.episode_start == "go_to_start",
-                                    params.pause_between_episodes)
+                                    params.pause_between_episodes, clearing=clearing)
         self.lock = threading.Lock()
         self.command_arrived = threading.Condition(self.lock)
         self.new_command = False  # lockstep: an arm command arrived since the last /clock
@@ -160,6 +174,8 @@ class SimulatorNode:
         self.goal_pub = (rospy.Publisher(params.goal_topic, PoseStamped, queue_size=1, latch=True)
                          if TASK_BLOCKS[task][1] else None)  # the task has a goal
         self.marker_pub = rospy.Publisher("~markers", MarkerArray, queue_size=2)
+        self.neighbours_pub = (rospy.Publisher(params.neighbours_topic, MarkerArray, queue_size=10)
+                               if params.neighbours_topic and clearing is not None else None)
         self.outcome_pub = rospy.Publisher("~episode_outcome", String, queue_size=10, latch=True)
         self.clock_pub = rospy.Publisher("/clock", Clock, queue_size=1) if params.lockstep else None
         self.command_sub = rospy.Subscriber(params.command_topic, Float64MultiArray, self._on_arm_command,
@@ -335,13 +351,15 @@ class SimulatorNode:
         # How long the simulated arm now ignores commands (a pause no real arm makes):
         # compare_run.py leaves it out of a recorded rehearsal.
         record["hold_s"] = self.params.pause_between_episodes + self.params.reset_settle_time
-        self.outcome_pub.publish(String(data=json.dumps(record)))
-        if self.outcome_log is not None:
-            with self.outcome_log.open("a") as log:
-                log.write(json.dumps(record) + "\n")
+        for outcome in [record] + self.runner.extra_records:
+            self.outcome_pub.publish(String(data=json.dumps(outcome)))
+            if self.outcome_log is not None:
+                with self.outcome_log.open("a") as log:
+                    log.write(json.dumps(outcome) + "\n")
         rospy.loginfo(f"episode {record['episode']} (seed {record['seed']}): "
-                      f"{'success' if verdict.success else 'failure (' + str(verdict.failure) + ')'}"
-                      f" after {verdict.steps} steps")
+                      f"{'success' if record['success'] else 'failure (' + str(record['failure']) + ')'}"
+                      f" after {verdict.steps} steps"
+                      + (f"; knocked over: {', '.join(record['knocked'])}" if record.get("knocked") else ""))
 
     # ------------------------------------------------------------------ callbacks
     def _on_arm_command(self, message: Float64MultiArray) -> None:
@@ -406,6 +424,17 @@ class SimulatorNode:
                                                    stamp))
         if self.object_pub is not None:
             self.object_pub.publish(object_marker(self.sim.scene(), self.sim.object_pose(), stamp))
+        if self.neighbours_pub is not None:
+            self.neighbours_pub.publish(neighbour_markers(self.sim.neighbour_shapes, self.sim.neighbour_poses(), stamp,
+                                                          self.spec.base_frame))
+
+    def publish_markers(self, stamp: rospy.Time) -> None:
+        """rviz: the table, the object, the tcp's path, the goal, and a scene's other objects."""
+        markers = scene_markers(self.sim.scene(), self.sim.object_pose(), self.runner.tcp_path, stamp)
+        if self.runner.clearing is not None:
+            markers.markers += neighbour_markers(self.sim.neighbour_shapes, self.sim.neighbour_poses(), stamp,
+                                                 self.spec.base_frame).markers
+        self.marker_pub.publish(markers)
 
     def publish_object_and_goal(self) -> None:
         """The new episode's object shape (as the camera stand-in) and goal, latched."""

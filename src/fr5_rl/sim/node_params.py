@@ -58,8 +58,18 @@ class SimNodeParams:
     episode_start: str
     first_command_timeout: float
     outcome_log: str
+    scene: str = ""  # "": one object an episode; "clear": a scene of several, cleared one object an episode
+    scenes: int = 0  # scene "clear": stop after this many scenes (0: run on, or ~episodes)
+    neighbours_topic: str = ""  # scene "clear": the other objects, for the simulated camera (MarkerArray, base_link)
 
     def check(self, source: str) -> None:
+        if self.scene not in ("", "clear"):
+            raise ConfigError(f"{source}: 'scene' must be \"\" (one object) or clear, got {self.scene!r}")
+        if self.scenes < 0 or (self.scenes and not self.scene):
+            raise ConfigError(f"{source}: 'scenes' must be >= 0, and only counts with scene: clear")
+        if self.scene and self.lockstep:
+            raise ConfigError(f"{source}: scene: clear runs in real time (its camera renders every object); "
+                              "set ~lockstep false")
         if self.servo_rate < 0 or self.servo_delay_cycles < 0:
             raise ConfigError(f"{source}: servo_rate and servo_delay_cycles must be >= 0 (0: no servo cycle)")
         check_time_constants(source, "response_time_constant_s", self.response_time_constant_s)

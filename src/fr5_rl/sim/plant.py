@@ -7,7 +7,7 @@ it advances physics, commands the joints and reads states back as named tuples i
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple, Optional, Sequence, Tuple
+from typing import List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -129,6 +129,7 @@ class Plant:
         self.object_shape: Optional[ObjectShape] = None
         self.object_rest_z = cfg.table.top_height
         self._held = None  # hold_object's constraint, or None
+        self._neighbours: List[Tuple[int, ObjectShape]] = []  # the other objects of a scene: (body, shape)
 
     # ------------------------------------------------------------------ the episode's scene
     def build_scene(self, draws: EpisodeDraws, start: Sequence[float], control_dt: float) -> Tuple[float, float, float]:
@@ -167,6 +168,27 @@ class Plant:
         position = (float(xy[0]), float(xy[1]), self.object_rest_z)
         self.world.place_object(position, yaw=float(yaw))
         return position
+
+    def set_neighbours(self, bodies: Sequence[Tuple[ObjectShape, float, float, Sequence[float], Sequence[float]]]) -> None:
+        """The scene's other objects, beside this episode's (the one the task judges): each
+        ``(shape, mass, friction, position, quaternion)`` (kg; m and (x, y, z, w) in base_link),
+        at rest. Those of the last call are removed first; ``[]`` leaves the object alone."""
+        for body, _ in self._neighbours:
+            self.world.remove_body(body)
+        self._neighbours = []
+        for shape, mass, friction, position, quaternion in bodies:
+            body = self.world.add_body(shape.kind, shape.dims, mass, friction, color=(0.2, 0.45, 0.9, 1.0))
+            self.world.place_body(body, position, quaternion)
+            self._neighbours.append((body, shape))
+
+    @property
+    def neighbour_shapes(self) -> List[ObjectShape]:
+        """The scene's other objects' kinds and sizes, in the order given to :meth:`set_neighbours`."""
+        return [shape for _, shape in self._neighbours]
+
+    def neighbour_poses(self) -> List[Pose]:
+        """Where the scene's other objects are now (ground truth, base_link), in the order given."""
+        return [_new_tuple(Pose, (*self.world.body_pose(body), self.spec.base_frame)) for body, _ in self._neighbours]
 
     def object_near_arm(self, clearance: float) -> bool:
         """Whether a link of the arm or gripper lies within ``clearance`` (m) of the object as

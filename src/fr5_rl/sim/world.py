@@ -105,6 +105,19 @@ class PyBulletWorld:
         """Remove a body made by :meth:`add_body`."""
         p.removeBody(body, physicsClientId=self.client)
 
+    def place_body(self, body: int, position: Sequence[float], quaternion: Sequence[float]) -> None:
+        """Teleport a body made by :meth:`add_body` to ``position`` (m) and ``quaternion`` (x, y,
+        z, w), at rest, asleep until something touches it (as :meth:`place_object` leaves the
+        object, and for the same reason: an awake neighbour costs physics steps)."""
+        p.resetBasePositionAndOrientation(body, list(position), list(quaternion), physicsClientId=self.client)
+        p.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+        p.changeDynamics(body, -1, activationState=p.ACTIVATION_STATE_ENABLE_SLEEPING, physicsClientId=self.client)
+        p.changeDynamics(body, -1, activationState=p.ACTIVATION_STATE_SLEEP, physicsClientId=self.client)
+
+    def body_pose(self, body: int) -> Tuple[Tuple[float, float, float], Tuple[float, float, float, float]]:
+        """A body's centre (m) and quaternion (x, y, z, w) in base_link."""
+        return p.getBasePositionAndOrientation(body, physicsClientId=self.client)
+
     def _shapes(self, shape: str, dims: Tuple[float, ...], color: Sequence[float]) -> Tuple[int, int]:
         """A new collision shape and (rendering worlds only) visual shape for an object."""
         if shape == "cylinder":

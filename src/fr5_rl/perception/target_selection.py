@@ -1,0 +1,177 @@
+"""One object of a scene as the target: chosen by rule, then followed into the hand and out of it
+(issue #54).
+
+The single-object detector refuses a second object on the table; a cell that clears a table
+sees several at once. :class:`SceneTargetTracker` sits between the scene's detections and the
+one-object :class:`~fr5_rl.perception.tracker.ObjectTracker` the policy's target comes from:
+
+- with no object tracked, it chooses one among those not yet placed (outside
+  ``config/clearing.yaml``'s drop area) by the rule (:func:`fr5_rl.clearing.choose_next`:
+  ``nearest``, ``kind``; or ``id``, a track id of :class:`~fr5_rl.perception.scene_tracker.SceneTracker`);
+- while it is tracked, each frame hands the tracker that object alone: the detection of its kind
+  nearest where the tracker believes it (within ``gate``), or, when none is, an OCCLUDED
+  refusal, so the tracker's own rules for a hidden or held object apply and the other objects
+  never count as "another object" to it;
+- once the tracked object is seen standing in the drop area, it is done: the tracker forgets it
+  and the next one is chosen in the same frame.
+
+The other objects stay where they are: nothing is published about them here (the node's
+``~objects`` report carries them all). Pure numpy, fed by the node.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from ..clearing import ClearingSettings, KINDS, check_rule, choose_next
+from .detector import Refusal, RefusalReason
+from .scene_detector import SceneDetection, SceneObjectFound
+from .scene_tracker import SceneTracker
+from .tracker import ObjectTracker, TrackedObject, TrackState
+
+
+@dataclass(frozen=True)
+class Selection:
+    """How the next object is chosen.
+
+    :param rule: ``nearest`` | ``kind`` | ``id`` (:data:`fr5_rl.clearing.RULES`).
+    :param kind: rule ``kind``: only this kind (``cylinder``, ``square box``, ``rectangular
+        box``); "" : the clearing settings' ``kind_order``.
+    :param track_id: rule ``id``: the object's track id (``fr5_rl/DetectedObjects``).
+    """
+
+    rule: str = "nearest"
+    kind: str = ""
+    track_id: int = 0
+
+    def check(self) -> None:
+        """:raises ValueError: a rule, kind or id that cannot choose anything (the message says which)."""
+        check_rule(self.rule)
+        if self.kind and self.kind not in KINDS:
+            raise ValueError(f"kind {self.kind!r} is none of {', '.join(KINDS)}")
+        if self.rule == "id" and self.track_id < 1:
+            raise ValueError("rule 'id' needs the object's track id (1, 2, ...: fr5_rl/DetectedObjects id)")
+
+
+@dataclass(frozen=True)
+class SceneFrame:
+    """What one frame gave.
+
+    :param target: the chosen object's pose to publish (:class:`TrackedObject`), or why not.
+    :param objects: ``(id, object)`` of every object the frame shows whole.
+    :param chosen_id: the target's track id (0: none chosen).
+    """
+
+    target: Union[TrackedObject, Refusal]
+    objects: List[Tuple[int, SceneObjectFound]]
+    chosen_id: int
+
+
+class SceneTargetTracker:
+    """Chooses the next object of a scene and follows it through the one-object tracker.
+
+    :param tracker: the one-object tracker whose answer is the policy's target.
+    :param scene_tracker: the track ids of every object.
+    :param clearing: the drop area (placed objects) and the rule's reference point and kind order.
+    :param gate: m in the table plane: the detection of the tracked object's kind nearest where it
+        is believed, this near, is it.
+    :param selection: the first rule.
+    """
+
+    def __init__(self, tracker: ObjectTracker, scene_tracker: SceneTracker, clearing: ClearingSettings,
+                 gate: float, selection: Selection = Selection()) -> None:
+        selection.check()
+        self.tracker, self.scene_tracker, self.clearing, self.gate = tracker, scene_tracker, clearing, gate
+        self.selection = selection
+        self.chosen_id = 0
+        self.chosen_kind = ""
+        self.position: Optional[Tuple[float, float, float]] = None  # where the tracker believes it (m, table)
+
+    def select(self, selection: Selection) -> str:
+        """Choose by ``selection`` from now on: at once, unless the target is in the hand (then
+        from the next choice, once it has been set down).
+
+        :raises ValueError: ``selection`` cannot choose anything.
+        :return: what happens, for a person.
+        """
+        selection.check()
+        self.selection = selection
+        if self.tracker.state is TrackState.IN_HAND:
+            return f"{selection.rule}: from the next object (object {self.chosen_id} is in the hand)"
+        self._forget()
+        return f"{selection.rule}: choosing now"
+
+    def update(self, scene: SceneDetection, stamp: float, depth: Optional[np.ndarray] = None, intrinsics=None,
+               table_from_optical: Optional[np.ndarray] = None, table_from_tcp: Optional[np.ndarray] = None,
+               gripper_width: Optional[float] = None, commanded_width: Optional[float] = None) -> SceneFrame:
+        """One frame: the scene's ids, the choice, and the tracker's answer for the chosen object.
+
+        :param scene: the frame's objects (:func:`~fr5_rl.perception.scene_detector.detect_scene`).
+        :param stamp: its capture time (s). The rest as :meth:`ObjectTracker.update` takes them.
+        """
+        objects = self.scene_tracker.update(scene, stamp)
+        match: Optional[Tuple[int, SceneObjectFound]] = None
+        if self.tracker.state is not TrackState.LOST and self.position is not None:
+            match = self._nearest(objects, self.chosen_kind, self.position)
+            if match is not None and self.tracker.state is not TrackState.IN_HAND \
+                    and self.clearing.in_drop_area(match[1].detection.position_table[:2]):
+                self._forget()  # set down in the drop area: done
+                match = None
+        elif self.tracker.state is not TrackState.LOST:
+            self._forget()
+        if self.tracker.state is TrackState.LOST:
+            self.chosen_id, self.chosen_kind = 0, ""
+            choice = self._choose(objects)
+            if isinstance(choice, Refusal):
+                return SceneFrame(choice, objects, 0)
+            match = choice
+            self.chosen_id, self.chosen_kind = match[0], match[1].detection.kind
+        if match is not None:
+            self.chosen_id = match[0]  # the scene tracker may have given it a new id (in the hand, it moved far)
+            fed = match[1].detection
+        else:
+            fed = Refusal(RefusalReason.OCCLUDED, f"object {self.chosen_id} ({self.chosen_kind}) not seen whole")
+        target = self.tracker.update(fed, stamp, depth, intrinsics, table_from_optical, table_from_tcp,
+                                     gripper_width, commanded_width)
+        if isinstance(target, TrackedObject):
+            self.position = target.position_table
+        elif self.tracker.state is TrackState.LOST:
+            self._forget()
+        return SceneFrame(target, objects, self.chosen_id)
+
+    # ------------------------------------------------------------------ inside
+    def _forget(self) -> None:
+        self.tracker.reset()
+        self.chosen_id, self.chosen_kind, self.position = 0, "", None
+
+    def _choose(self, objects: Sequence[Tuple[int, SceneObjectFound]]
+                ) -> Union[Tuple[int, SceneObjectFound], Refusal]:
+        pickable = [entry for entry in objects
+                    if not self.clearing.in_drop_area(entry[1].detection.position_table[:2])]
+        selection = self.selection
+        if selection.rule == "id":
+            chosen = next((entry for entry in pickable if entry[0] == selection.track_id), None)
+            if chosen is None:
+                return Refusal(RefusalReason.NO_OBJECT, f"object {selection.track_id} is not in view outside "
+                                                        f"the drop area (rule id)")
+            return chosen
+        chosen = choose_next([(entry, entry[1].label, entry[1].detection.position_table[:2]) for entry in pickable],
+                             selection.rule, self.clearing.reference_xy, self.clearing.kind_order,
+                             selection.kind or None)
+        if chosen is None:
+            what = f"no {selection.kind}" if selection.kind else "no object"
+            return Refusal(RefusalReason.NO_OBJECT, f"{what} in view outside the drop area (rule {selection.rule}): the table is clear, or the arm hides what is left")
+        return chosen
+
+    def _nearest(self, objects: Sequence[Tuple[int, SceneObjectFound]], kind: str,
+                 position: Sequence[float]) -> Optional[Tuple[int, SceneObjectFound]]:
+        best, best_distance = None, self.gate
+        for entry in objects:
+            xyz = entry[1].detection.position_table
+            distance = math.hypot(xyz[0] - position[0], xyz[1] - position[1])
+            if entry[1].detection.kind == kind and distance <= best_distance:
+                best, best_distance = entry, distance
+        return best

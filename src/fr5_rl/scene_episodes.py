@@ -1,0 +1,139 @@
+"""Clearing the table in the simulator: a scene of several objects, one episode per object
+(issue #54).
+
+:class:`TableClearing` is what the simulator node (and the benches) run when a cell is to clear
+a table rather than handle one object at a time:
+
+- a scene of ``config/clearing.yaml`` ``count`` objects stands in its pick area (drawn from the
+  run's seed and the scene's number: :func:`fr5_rl.scenes.draw_scene`);
+- each episode's object is the next one by the clearing rule (:func:`fr5_rl.clearing.choose_next`
+  on the true poses: the same rule the detector's selection applies to what it measures); its goal
+  is the next free drop slot; the others stand around it, where the last episode left them;
+- after the episode, a neighbour the arm knocked over (tilted past ``place.knocked_over_angle_deg``)
+  fails it (``knocked_neighbour``), and is taken off the table as an operator would, with a
+  record of its own (``knocked_over``) if it had not been placed yet; an object the episode did
+  not place is taken off the table too. So every object of a scene gets exactly one record;
+- once no object is left to pick, the next scene is drawn.
+
+Only the task's own object is judged by the task; the rest is this module's.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, Dict, List, Tuple
+
+import numpy as np
+
+from .clearing import ClearingSettings, choose_next
+from .episode import Episode
+from .scenes import EpisodeScene, SceneSettings, StandingBody, draw_scene
+from .tasks import EpisodeVerdict
+
+
+def scene_generator(seed: int, scene: int) -> np.random.Generator:
+    """The generator scene number ``scene`` (0, 1, ...) of a run seeded ``seed`` is drawn from
+    (apart from the episodes' own seeds)."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), int(scene), 54]))
+
+
+def scene_sizes(episode: Episode, settings: ClearingSettings, seed: int, scenes: int) -> List[int]:
+    """How many objects each of the first ``scenes`` scenes of a run holds (a run of them has
+    that many episodes)."""
+    clearing = TableClearing(episode, settings, seed)
+    return [len(clearing.draw(number)) for number in range(scenes)]
+
+
+class TableClearing:
+    """The scenes of a clearing run on one simulated cell, episode after episode.
+
+    :param episode: the simulated cell (its configuration: table, region, ``place`` limits).
+    :param settings: ``config/clearing.yaml``.
+    :param seed: the run's seed (scene k is drawn from :func:`scene_generator`).
+    """
+
+    def __init__(self, episode: Episode, settings: ClearingSettings, seed: int) -> None:
+        self.cfg, self.settings, self.seed = episode.cfg, settings, seed
+        self.scene_settings = dataclasses.replace(SceneSettings.from_yaml(), count=list(settings.count),
+                                                  min_gap=settings.min_gap, touching_share=0.0)
+        self.upright_cos = math.cos(math.radians(self.cfg.place.knocked_over_angle_deg))
+        self.scene_number = -1
+        self.bodies: List[StandingBody] = []  # every object on the table now, the episode's target first
+        self.placed: List[bool] = []  # by body: set down in the drop area by an episode
+        self.slot = 0  # the next free drop slot
+        self.object_in_scene = 0  # episodes (records) of this scene so far
+        self.extra_records: List[Dict[str, Any]] = []  # objects knocked over: a record each
+
+    def draw(self, number: int) -> List[StandingBody]:
+        """Scene ``number``'s objects, standing where they were drawn."""
+        low, high = self.settings.pick_area_low, self.settings.pick_area_high
+        return [StandingBody.of(item) for item in draw_scene(scene_generator(self.seed, number), self.cfg,
+                                                               self.scene_settings, region=(low, high))]
+
+    def pickable(self) -> List[int]:
+        """Indices of the objects still to pick: upright and not in the drop area."""
+        return [i for i, body in enumerate(self.bodies)
+                if not self.placed[i] and not self.settings.in_drop_area(body.position[:2])
+                and body.up_z >= self.upright_cos]
+
+    def next_scene(self) -> EpisodeScene:
+        """The next episode: the next object by the rule, the next free slot, the others around.
+        A scene with nothing left to pick gives way to the next one."""
+        left = self.pickable()
+        if not left:
+            self.scene_number += 1
+            self.bodies = self.draw(self.scene_number)
+            self.placed = [False] * len(self.bodies)
+            self.slot, self.object_in_scene = 0, 0
+            left = self.pickable()
+        settings = self.settings
+        index = choose_next([(i, self.bodies[i].label, self.bodies[i].position[:2]) for i in left],
+                            settings.rule if settings.rule != "id" else "nearest", settings.reference_xy,
+                            settings.kind_order)
+        # The target first: after the episode, the episode's object and the rest come back in this order.
+        order = [index] + [i for i in range(len(self.bodies)) if i != index]
+        self.bodies = [self.bodies[i] for i in order]
+        self.placed = [self.placed[i] for i in order]
+        goal = tuple(settings.drop_slots[min(self.slot, len(settings.drop_slots) - 1)])
+        return EpisodeScene(self.bodies[0], goal, tuple(self.bodies[1:]))
+
+    def finish(self, episode: Episode, verdict: EpisodeVerdict) -> Tuple[EpisodeVerdict, Dict[str, Any]]:
+        """After the episode: where everything ended, which neighbours were knocked over, and
+        what stays on the table.
+
+        :return: the verdict (a success that knocked a neighbour over fails as
+            ``knocked_neighbour``) and the episode record's clearing fields (``scene``,
+            ``object_in_scene``, ``knocked``: labels); records for knocked objects not placed
+            before are left in :attr:`extra_records`.
+        """
+        target = episode.object_pose()
+        poses = [target] + list(episode.neighbour_poses())
+        before = self.bodies
+        self.bodies = [body.moved(pose.position, pose.quaternion) for body, pose in zip(before, poses)]
+        knocked = [i for i in range(1, len(self.bodies))
+                   if before[i].up_z >= self.upright_cos > self.bodies[i].up_z]
+        if verdict.success and knocked:
+            verdict = dataclasses.replace(verdict, success=False, failure="knocked_neighbour")
+        fields = {"scene": self.scene_number, "object_in_scene": self.object_in_scene,
+                  "knocked": [self.bodies[i].label for i in knocked]}
+        self.object_in_scene += 1
+        placed = verdict.success or (verdict.failure == "knocked_neighbour"
+                                     and self.settings.in_drop_area(self.bodies[0].position[:2]))
+        if placed:
+            self.placed[0] = True
+            self.slot += 1
+        self.extra_records = []
+        for i in knocked:
+            if not self.placed[i]:
+                body = self.bodies[i]
+                self.extra_records.append({
+                    "success": False, "failure": "knocked_over", "steps": 0, "scene": self.scene_number,
+                    "object_in_scene": self.object_in_scene, "object": body.label,
+                    "object_x": round(float(body.position[0]), 4), "object_y": round(float(body.position[1]), 4)})
+                self.object_in_scene += 1
+        # What the episode did not place, and what it knocked over, an operator takes away.
+        gone = set(knocked) | (set() if placed else {0})
+        keep = [i for i in range(len(self.bodies)) if i not in gone]
+        self.bodies = [self.bodies[i] for i in keep]
+        self.placed = [self.placed[i] for i in keep]
+        return verdict, fields
