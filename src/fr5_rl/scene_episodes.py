@@ -113,7 +113,7 @@ class TableClearing:
         knocked = [i for i in range(1, len(self.bodies))
                    if before[i].up_z >= self.upright_cos > self.bodies[i].up_z]
         if verdict.success and knocked:
-            verdict = dataclasses.replace(verdict, success=False, failure="knocked_neighbour")
+            verdict = verdict._replace(success=False, failure="knocked_neighbour")
         fields = {"scene": self.scene_number, "object_in_scene": self.object_in_scene,
                   "knocked": [self.bodies[i].label for i in knocked]}
         self.object_in_scene += 1
