@@ -7,11 +7,13 @@ TASK ?= reach
 ALGO ?= ppo
 ROBOT ?= fr5
 EPISODES ?= 5
+SCENE ?=
 
 .PHONY: setup demo test test-fast bench bench-grasp bench-vision bench-ray train meshes lint clean help
 
 help:
 	@echo "make demo   - set up, then run the closed loop (simulator + policy) with the shipped model"
+	@echo "              SCENE=clear: clear a table of several objects through camera, detector and driver (models/place)"
 	@echo "make test   - set up, then run the whole test suite (pytest + rostest)"
 	@echo "make test-fast - set up, then only the pure-logic tests (no training, Ray, roscore, lint or command lines; < 60 s)"
 	@echo "make lint   - set up, then catkin_lint, ruff (config: ruff.toml), and the URDF, launch-file and command-line checks"
@@ -25,7 +27,7 @@ setup:
 	@bash tools/setup.sh
 
 demo: setup
-	@$(ENV) bash tools/demo.sh $(EPISODES)
+	@$(ENV) SCENE="$(SCENE)" bash tools/demo.sh $(EPISODES)
 
 test: setup
 	@$(ENV) bash tools/run_tests.sh

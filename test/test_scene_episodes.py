@@ -76,7 +76,7 @@ def test_a_placed_object_stays_and_the_next_goal_is_the_next_slot(episode):
     episode.plant.place_object((x, y), yaw)
     settle(episode)
     outcome, fields = clearing.finish(episode, verdict(True))
-    assert outcome.success and fields == {"scene": 0, "object_in_scene": 0, "knocked": []}
+    assert outcome.success and fields == {"scene": 0, "object_in_scene": 0, "chosen_by": "rule", "knocked": []}
     second = clearing.next_scene()
     assert second.goal == tuple(SETTINGS.drop_slots[1])
     assert len(second.others) == count - 1  # the placed one is among them, in the drop area
@@ -91,6 +91,7 @@ def test_an_object_not_placed_is_taken_off_the_table(episode):
     episode.start(8, {"scene": first})
     settle(episode, 5)
     clearing.finish(episode, verdict(False, "timeout"))
+    assert episode.object_pose().position[2] < -1.0  # off the table at once: the camera must not see it
     second = clearing.next_scene()
     assert 1 + len(second.others) == count - 1
     assert second.goal == tuple(SETTINGS.drop_slots[0])  # no slot was used
@@ -114,6 +115,7 @@ def test_a_neighbour_knocked_over_fails_the_pick_and_gets_a_record_of_its_own(ep
     assert fields["knocked"] == [other.label]
     assert [record["failure"] for record in clearing.extra_records] == ["knocked_over"]
     assert clearing.extra_records[0]["object_in_scene"] == 1
+    assert len(episode.neighbour_poses()) == count - 2  # the knocked one gone from the world at once
     # The placed object stays; the knocked one is gone; the rest stand.
     second = clearing.next_scene()
     assert 1 + len(second.others) == count - 1
@@ -140,3 +142,33 @@ def test_a_tilted_target_is_never_chosen(episode):
     clearing.bodies[1] = tilted
     assert 1 not in clearing.pickable() and 0 in clearing.pickable()
     assert quaternion_of_yaw(0.0) == pytest.approx((0.0, 0.0, 0.0, 1.0)) and scene.target is clearing.bodies[0]
+
+
+def test_the_object_the_cell_chose_is_the_one_judged(episode):
+    clearing = TableClearing(episode, SETTINGS, 81)
+    bodies = clearing.draw(0)
+    by_rule = clearing.next_scene().target
+    other = next(body for body in bodies if body.position != by_rule.position)
+    clearing = TableClearing(episode, SETTINGS, 81)
+    chosen = clearing.next_scene(chosen_xy=(other.position[0] + 0.01, other.position[1] - 0.01))
+    assert chosen.target.position == other.position and clearing.chosen_by == "cell"
+    # A choice that names no object (the one just placed, or nothing there): the rule.
+    clearing = TableClearing(episode, SETTINGS, 81)
+    assert clearing.next_scene(chosen_xy=SETTINGS.drop_slots[0][:2]).target.position == by_rule.position
+    assert clearing.chosen_by == "rule"
+
+
+def test_another_object_carried_to_the_drop_area_fails_the_pick_and_is_counted(episode):
+    clearing = TableClearing(episode, SETTINGS, 91)
+    first = clearing.next_scene()
+    count = 1 + len(first.others)
+    episode.start(11, {"scene": first})
+    body = episode.plant._neighbours[0][0]
+    x, y, _ = first.goal
+    episode.plant.world.place_body(body, (x, y, first.others[0].position[2]), (0.0, 0.0, 0.0, 1.0))
+    settle(episode, 10)
+    outcome, _ = clearing.finish(episode, verdict(False, "timeout"))
+    assert outcome.failure == "other_object_placed"
+    assert [record["failure"] for record in clearing.extra_records] == ["other_object_placed"]
+    # Neither the one judged nor the one carried off stays to be picked: one record each.
+    assert 1 + len(clearing.next_scene().others) == count - 2

@@ -19,6 +19,8 @@ from fr5_rl.perception.tracker import ObjectTracker, TrackedObject, TrackerSetti
 from fr5_rl.transforms import matrix_from_xyz_rpy
 
 CLEARING = ClearingSettings.from_yaml()
+# The selection's tests name positions by their distance to the robot's base.
+AT_BASE = dataclasses.replace(CLEARING, reference_xy=[0.0, 0.0])
 
 
 # ----------------------------------------------------------------------------- the rule
@@ -85,7 +87,7 @@ class Cell:
         table = TableRegion.from_env(load_env_config())
         settings = TrackerSettings.from_yaml()
         self.tracker = ObjectTracker(settings, typed(DetectorSettings, load_yaml("detector")["detector"], "d"), table)
-        self.selector = SceneTargetTracker(self.tracker, SceneTracker(0.02, settings.hidden_timeout), CLEARING, 0.04,
+        self.selector = SceneTargetTracker(self.tracker, SceneTracker(0.02, settings.hidden_timeout), AT_BASE, 0.04,
                                            selection)
         self.stamp = 0.0
 
@@ -126,7 +128,7 @@ def test_the_nearest_object_is_chosen_and_kept_while_others_come_and_go():
 
 def test_objects_in_the_drop_area_are_never_chosen():
     cell = Cell()
-    placed = found(*CLEARING.drop_slots[0][:2])  # nearer the base than the other
+    placed = found(*CLEARING.drop_slots[2][:2])  # nearer the base than the other
     frame = cell.frame(placed, found(-0.65, -0.25))
     assert chosen_position(frame) == pytest.approx((-0.65, -0.25))
     cell = Cell()
@@ -153,8 +155,34 @@ def test_the_object_carried_to_the_drop_area_is_done_and_the_next_one_is_chosen(
     down = tcp_at(goal[0], goal[1], HEIGHT / 2.0)
     let_go = cell.frame(other, tcp=down, width=0.08, commanded=0.08)
     assert let_go.target.state is TrackState.HIDDEN
-    next_one = cell.frame(found(*goal), other, tcp=down, width=0.08, commanded=0.08)
+    # The hand still over it (the policy lets go and rises): it stays the target.
+    still = cell.frame(found(*goal), other, tcp=tcp_at(goal[0], goal[1], HEIGHT + 0.03), width=0.08, commanded=0.08)
+    assert chosen_position(still) == pytest.approx(goal, abs=0.01)
+    # The hand gone from it: done, and the other one is next.
+    away = tcp_at(goal[0], goal[1] - 0.1, HEIGHT + 0.15)
+    next_one = cell.frame(found(*goal), other, tcp=away, width=0.08, commanded=0.08)
     assert chosen_position(next_one) == pytest.approx((-0.62, -0.20))
+
+
+def test_the_cells_next_chooses_at_once_and_that_object_is_followed():
+    cell = Cell()
+    first, second, third = found(-0.40, -0.10), found(-0.50, -0.15), found(-0.65, -0.25)
+    assert chosen_position(cell.frame(first, second, third)) == pytest.approx((-0.40, -0.10))
+    chosen = cell.selector.next_object()  # given up on the first: it stays, but is no longer chosen ...
+    assert chosen is not None and chosen[1].detection.position_table[:2] == (-0.40, -0.10)
+    # ... unless the rule names it again: the rule's choice among the last frame's objects.
+    cell.selector.select(Selection("kind", "square box"))
+    box = found(-0.60, 0.0, "box")
+    cell.frame(first, second, box)
+    chosen = cell.selector.next_object()
+    assert chosen[1].detection.position_table[:2] == (-0.60, 0.0) and cell.selector.chosen_id == chosen[0]
+    # The frames then follow that object, even when a nearer one of its kind comes.
+    later = cell.frame(first, second, box, found(-0.36, -0.02, "box"))
+    assert chosen_position(later) == pytest.approx((-0.60, 0.0)) and later.chosen_id == chosen[0]
+    # Nothing left to choose: None, and every frame says so.
+    cell = Cell()
+    cell.frame(found(*CLEARING.drop_slots[0][:2]))
+    assert cell.selector.next_object() is None
 
 
 def test_a_rule_changed_while_an_object_is_in_the_hand_applies_to_the_next_choice():
@@ -166,9 +194,10 @@ def test_a_rule_changed_while_an_object_is_in_the_hand_applies_to_the_next_choic
     assert cell.between(tcp_at(-0.42, -0.10, HEIGHT / 2.0 + 0.03), size, 0.0).state is TrackState.IN_HAND
     answer = cell.selector.select(Selection("kind", "square box"))
     assert "next" in answer and cell.tracker.state is TrackState.IN_HAND
-    # Not in the hand: at once.
+    # Not in the hand: at once; the rule in force again changes nothing.
     cell = Cell()
     cell.frame(picked, box)
+    assert "unchanged" in cell.selector.select(Selection()) and cell.tracker.state is TrackState.SEEN
     assert "now" in cell.selector.select(Selection("kind", "square box"))
     assert chosen_position(cell.frame(picked, box)) == pytest.approx((-0.62, -0.20))
 

@@ -274,6 +274,10 @@ class Episode:
         """Where a scene's other objects are now (ground truth, base_link), in the scene's order."""
         return self.plant.neighbour_poses()
 
+    def take_off_table(self, neighbours: Sequence[int], the_object: bool = False) -> None:
+        """Take a scene's objects away between episodes (:meth:`fr5_rl.sim.plant.Plant.take_off_table`)."""
+        self.plant.take_off_table(neighbours, the_object)
+
     @property
     def neighbour_shapes(self) -> List[ObjectShape]:
         """A scene's other objects' kinds and sizes, in the scene's order."""

@@ -137,18 +137,20 @@ class EpisodeRunner:
         return self.go_to_start and self.episode > 0
 
     # ------------------------------------------------------------------ episodes
-    def place_next(self, settle: float = 0.0) -> None:
+    def place_next(self, settle: float = 0.0, chosen_xy: Optional[Sequence[float]] = None) -> None:
         """Draw and place the next episode (seed + episodes finished): a new object, and the arm
         teleported to its start unless :attr:`next_start_keeps_the_arm`. Commands in flight are
         dropped; the driver's servo loop keeps its phase, as a real driver's runs on.
 
         :param settle: s the new scene stands before the policy is told (``SETTLING``); 0: at once
             (the caller then calls :meth:`begin`).
+        :param chosen_xy: a clearing run: where the object the cell chose next stands (m,
+            base_link; :meth:`~fr5_rl.scene_episodes.TableClearing.next_scene`); None: the rule's.
         """
         seed = self.seed + self.episode
         options: Dict[str, Any] = {}
         if self.clearing is not None:
-            options["scene"] = self.clearing.next_scene()
+            options["scene"] = self.clearing.next_scene(chosen_xy)
         if self.next_start_keeps_the_arm:
             options["arm_positions"] = self.sim.joint_positions().tolist()
         self.sim.start(seed, options=options or None)

@@ -12,8 +12,10 @@ one-object :class:`~fr5_rl.perception.tracker.ObjectTracker` the policy's target
   nearest where the tracker believes it (within ``gate``), or, when none is, an OCCLUDED
   refusal, so the tracker's own rules for a hidden or held object apply and the other objects
   never count as "another object" to it;
-- once the tracked object is seen standing in the drop area, it is done: the tracker forgets it
-  and the next one is chosen in the same frame.
+- once the tracked object stands in the drop area and the hand has left it (``done_clearance``),
+  or when the cell's sequencer says so (:meth:`SceneTargetTracker.next_object`: the detector node's
+  ``~next``), it is done: the tracker forgets it and the next one is chosen. Switching while the
+  policy still lets go of it sent the hand to the next object through the one just placed.
 
 The other objects stay where they are: nothing is published about them here (the node's
 ``~objects`` report carries them all). Pure numpy, fed by the node.
@@ -79,30 +81,52 @@ class SceneTargetTracker:
     :param gate: m in the table plane: the detection of the tracked object's kind nearest where it
         is believed, this near, is it.
     :param selection: the first rule.
+    :param done_clearance: m: an object set down in the drop area is done once the tcp is this far
+        from it (a policy letting go of it still needs it as its target), or when the cell's
+        sequencer says so (:meth:`next_object`).
     """
 
     def __init__(self, tracker: ObjectTracker, scene_tracker: SceneTracker, clearing: ClearingSettings,
-                 gate: float, selection: Selection = Selection()) -> None:
+                 gate: float, selection: Selection = Selection(), done_clearance: float = 0.12) -> None:
         selection.check()
         self.tracker, self.scene_tracker, self.clearing, self.gate = tracker, scene_tracker, clearing, gate
-        self.selection = selection
+        self.selection, self.done_clearance = selection, done_clearance
+        self.last_objects: List[Tuple[int, SceneObjectFound]] = []  # the last frame's, with their ids
+        self.pending: Optional[Tuple[float, float, float]] = None  # chosen by next_object(), not yet followed
         self.chosen_id = 0
         self.chosen_kind = ""
         self.position: Optional[Tuple[float, float, float]] = None  # where the tracker believes it (m, table)
 
     def select(self, selection: Selection) -> str:
         """Choose by ``selection`` from now on: at once, unless the target is in the hand (then
-        from the next choice, once it has been set down).
+        from the next choice, once it has been set down). The selection in force changes nothing.
 
         :raises ValueError: ``selection`` cannot choose anything.
         :return: what happens, for a person.
         """
         selection.check()
+        if selection == self.selection:
+            return f"{selection.rule}: unchanged"
         self.selection = selection
         if self.tracker.state is TrackState.IN_HAND:
             return f"{selection.rule}: from the next object (object {self.chosen_id} is in the hand)"
         self._forget()
         return f"{selection.rule}: choosing now"
+
+    def next_object(self) -> Optional[Tuple[int, SceneObjectFound]]:
+        """The cell's sequencer says the current object is done (placed, or given up): forget it
+        and choose the next one now, among the objects of the last frame.
+
+        :return: ``(id, object)`` of the object chosen (the next frames follow it), or None when
+            the last frame showed none to choose (then each frame chooses by the rule).
+        """
+        self._forget()
+        choice = self._choose(self.last_objects)
+        if isinstance(choice, Refusal):
+            return None
+        self.chosen_id, self.chosen_kind = choice[0], choice[1].detection.kind
+        self.pending = tuple(choice[1].detection.position_table)
+        return choice
 
     def update(self, scene: SceneDetection, stamp: float, depth: Optional[np.ndarray] = None, intrinsics=None,
                table_from_optical: Optional[np.ndarray] = None, table_from_tcp: Optional[np.ndarray] = None,
@@ -112,17 +136,26 @@ class SceneTargetTracker:
         :param scene: the frame's objects (:func:`~fr5_rl.perception.scene_detector.detect_scene`).
         :param stamp: its capture time (s). The rest as :meth:`ObjectTracker.update` takes them.
         """
-        objects = self.scene_tracker.update(scene, stamp)
+        objects = self.last_objects = self.scene_tracker.update(scene, stamp)
         match: Optional[Tuple[int, SceneObjectFound]] = None
-        if self.tracker.state is not TrackState.LOST and self.position is not None:
+        state = self.tracker.state
+        if state is not TrackState.LOST and self.position is not None:
             match = self._nearest(objects, self.chosen_kind, self.position)
-            if match is not None and self.tracker.state is not TrackState.IN_HAND \
-                    and self.clearing.in_drop_area(match[1].detection.position_table[:2]):
-                self._forget()  # set down in the drop area: done
+            where = match[1].detection.position_table if match is not None else self.position
+            if state is not TrackState.IN_HAND and self.clearing.in_drop_area(where[:2]) \
+                    and self._hand_away(where, table_from_tcp):
+                self._forget()  # set down in the drop area, and the hand has left it: done
                 match = None
-        elif self.tracker.state is not TrackState.LOST:
+        elif state is not TrackState.LOST:
             self._forget()
-        if self.tracker.state is TrackState.LOST:
+        if self.tracker.state is TrackState.LOST and self.pending is not None:
+            # Chosen by next_object(): that object, once a frame shows it.
+            match = self._nearest(objects, self.chosen_kind, self.pending)
+            if match is None:
+                return SceneFrame(Refusal(RefusalReason.OCCLUDED, f"object {self.chosen_id} ({self.chosen_kind}), "
+                                                                  f"chosen next, not seen whole"), objects, self.chosen_id)
+            self.pending = None
+        elif self.tracker.state is TrackState.LOST:
             self.chosen_id, self.chosen_kind = 0, ""
             choice = self._choose(objects)
             if isinstance(choice, Refusal):
@@ -142,10 +175,18 @@ class SceneTargetTracker:
             self._forget()
         return SceneFrame(target, objects, self.chosen_id)
 
+    def _hand_away(self, position: Sequence[float], table_from_tcp: Optional[np.ndarray]) -> bool:
+        """Whether the tcp is more than ``done_clearance`` from ``position`` (m, table frame):
+        a policy still letting go of a placed object needs it as its target (unknown: away)."""
+        if table_from_tcp is None:
+            return True
+        tcp = np.asarray(table_from_tcp, dtype=np.float64)[:3, 3]
+        return float(np.linalg.norm(tcp - np.asarray(position, dtype=np.float64))) > self.done_clearance
+
     # ------------------------------------------------------------------ inside
     def _forget(self) -> None:
         self.tracker.reset()
-        self.chosen_id, self.chosen_kind, self.position = 0, "", None
+        self.chosen_id, self.chosen_kind, self.position, self.pending = 0, "", None, None
 
     def _choose(self, objects: Sequence[Tuple[int, SceneObjectFound]]
                 ) -> Union[Tuple[int, SceneObjectFound], Refusal]:

@@ -73,6 +73,7 @@ from ..perception.target_selection import SceneTargetTracker, Selection
 from ..clearing import ClearingSettings
 from ..scenes import SceneSettings
 from ..perception.tracker import ObjectTracker, TrackedObject, TrackerSettings, TrackState, rotation_z
+from ..objects import quaternion_of_yaw
 from ..transforms import matrix_from_quaternion, quaternion_from_matrix
 from .images import image_message
 from .params import exit_if_help_asked, node_parameters
@@ -113,7 +114,8 @@ class DetectorNodeParams:
         ``kind`` or ``id`` (``clearing``: config/clearing.yaml's ``rule``): the target is one
         object of a scene, chosen by that rule
         (:class:`fr5_rl.perception.target_selection.SceneTargetTracker`, config/clearing.yaml),
-        changed at run time through ``~select`` (fr5_rl/SelectObject).
+        changed at run time through ``~select`` (fr5_rl/SelectObject); a cell's sequencer says an
+        object is done, and learns the next, through ``~next`` (fr5_rl/NextObject).
     :param selection_kind: rule ``kind``: only this kind; "": clearing.yaml's ``kind_order``.
     :param selection_gate: m: with a selection, the detection of the target's kind nearest where
         it is believed, this near, is the target.
@@ -300,13 +302,14 @@ class DetectorNode:
             if params.object_markers_topic:
                 self.markers_pub = rospy.Publisher(params.object_markers_topic, MarkerArray, queue_size=1)
         if params.selection_rule:
-            from ..srv import SelectObject  # built by catkin from srv/
+            from ..srv import NextObject, SelectObject  # built by catkin from srv/
 
             clearing = ClearingSettings.from_yaml()
             rule = clearing.rule if params.selection_rule == "clearing" else params.selection_rule
             self.selector = SceneTargetTracker(self.tracker, self.scene_tracker, clearing, params.selection_gate,
                                                Selection(rule, params.selection_kind, 1))
             rospy.Service("~select", SelectObject, self.on_select)
+            rospy.Service("~next", NextObject, self.on_next)
         for topic in params.joint_states_topics:
             rospy.Subscriber(topic, JointState, self.on_joint_state, queue_size=10, tcp_nodelay=True)
         if params.gripper_command_topic:
@@ -433,6 +436,24 @@ class DetectorNode:
             return SelectObjectResponse(success=False, message=str(error))
         rospy.loginfo(f"detector_node: selection {message}")
         return SelectObjectResponse(success=True, message=message)
+
+    def on_next(self, _request):
+        """``~next`` (fr5_rl/NextObject): the current object is done; the next one, chosen now."""
+        from ..srv import NextObjectResponse
+
+        with self.tracker_lock:
+            chosen = self.selector.next_object()
+        if chosen is None:
+            return NextObjectResponse(success=False, message="the last frame showed no object to choose outside "
+                                                             "the drop area")
+        track_id, found = chosen
+        answer = NextObjectResponse(success=True, message=f"object {track_id} ({found.label})", id=track_id,
+                                    kind=found.label)
+        position, orientation = answer.pose.position, answer.pose.orientation
+        position.x, position.y, position.z = found.detection.position_table
+        orientation.x, orientation.y, orientation.z, orientation.w = quaternion_of_yaw(found.detection.yaw)
+        rospy.loginfo(f"detector_node: next: object {track_id} ({found.label})")
+        return answer
 
     def choose_and_track(self, depth_m: np.ndarray, intrinsics: Intrinsics, color: Image) -> Union[TrackedObject, Refusal]:
         """With a selection: every object of the frame, the chosen one followed by the tracker

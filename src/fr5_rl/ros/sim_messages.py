@@ -80,7 +80,7 @@ def neighbour_markers(shapes: Sequence[ObjectShape], poses: Sequence[Pose], stam
     markers = [Marker(action=Marker.DELETEALL, ns="neighbours")]
     for number, (shape, pose) in enumerate(zip(shapes, poses)):
         item = _marker(Marker.CYLINDER if shape.kind == "cylinder" else Marker.CUBE, "neighbours",
-                       (0.2, 0.45, 0.9, 1.0), frame_id, stamp)
+                       (0.9, 0.55, 0.1, 1.0), frame_id, stamp)
         item.id = number
         item.scale.x, item.scale.y, item.scale.z = shape.size
         item.pose.position.x, item.pose.position.y, item.pose.position.z = pose.position

@@ -183,6 +183,12 @@ class SimulatorNode:
         if self.controller is None:
             rospy.Subscriber(params.gripper_command_topic, Float64, self._on_gripper_command, queue_size=1,
                              tcp_nodelay=True)
+        # A clearing run: the cell's sequencer asks its detector for the next object.
+        self.cell_next = None
+        if clearing is not None and params.cell_next_service:
+            from ..srv import NextObject  # built by catkin from srv/
+
+            self.cell_next = rospy.ServiceProxy(params.cell_next_service, NextObject)
         rospy.Service("~reset", Trigger, self._on_reset)
         # Camera calibration (calibrate_camera.py): the cup fixed in the closed gripper, no episodes.
         rospy.Service("~calibration", SetBool, self._on_calibration)
@@ -223,7 +229,7 @@ class SimulatorNode:
         runner = self.runner
         if not runner.next_start_keeps_the_arm and runner.episode > 0 and not self.params.lockstep:
             self._pause_policy_for_teleport()
-        runner.place_next(settle)
+        runner.place_next(settle, self._ask_cell_for_the_next() if runner.clearing is not None else None)
         self.publish_object_and_goal()
         self.controller_command = None  # the controller's standing command applies anew
         if settle <= 0.0:
@@ -389,6 +395,30 @@ class SimulatorNode:
             self.runner.take_gripper_command(width, None if self.params.lockstep else time.monotonic())
             self.new_gripper_command = True
             self.command_arrived.notify_all()
+
+    def _ask_cell_for_the_next(self) -> Optional[Tuple[float, float]]:
+        """A clearing run (lock held): the cell's detector is told the last object is done and
+        answers with the next one (``~cell_next_service``); where it stands (m, base_link), or
+        None (no detector, no answer in ``~policy_call_timeout``, or none to choose: the rule's
+        choice on the truth then stands)."""
+        if self.cell_next is None:
+            return None
+        answers: List = []
+
+        def ask() -> None:
+            try:
+                answers.append(self.cell_next())
+            except (rospy.ServiceException, rospy.ROSException) as error:
+                rospy.logwarn_throttle(10.0, f"sim_node: no next object from {self.params.cell_next_service}: {error}")
+
+        # The loop holds the lock: a detector that does not answer must not stall the arm's states.
+        caller = threading.Thread(target=ask, daemon=True)
+        caller.start()
+        caller.join(self.params.policy_call_timeout)
+        if not answers or not answers[0].success:
+            return None
+        position = answers[0].pose.position
+        return (position.x, position.y)
 
     def _on_calibration(self, request) -> SetBoolResponse:
         """~calibration (std_srvs/SetBool), real time only. True: a calibration session: the cup

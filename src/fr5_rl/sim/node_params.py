@@ -61,6 +61,7 @@ class SimNodeParams:
     scene: str = ""  # "": one object an episode; "clear": a scene of several, cleared one object an episode
     scenes: int = 0  # scene "clear": stop after this many scenes (0: run on, or ~episodes)
     neighbours_topic: str = ""  # scene "clear": the other objects, for the simulated camera (MarkerArray, base_link)
+    cell_next_service: str = ""  # scene "clear": fr5_rl/NextObject (the detector's ~next): its answer is the next object judged
 
     def check(self, source: str) -> None:
         if self.scene not in ("", "clear"):

@@ -22,6 +22,7 @@ __all__ = ["Contacts", "JointStates", "Measurement", "Plant", "Pose", "SceneDesc
 
 
 _new_tuple = tuple.__new__
+OUT_OF_THE_WORLD = (0.0, 0.0, -10.0)  # m, base_link: where an object taken off the table waits
 
 class JointStates(NamedTuple):
     """Measured state of the eight joints, by name, as ``sensor_msgs/JointState`` carries it.
@@ -180,6 +181,17 @@ class Plant:
             body = self.world.add_body(shape.kind, shape.dims, mass, friction, color=(0.2, 0.45, 0.9, 1.0))
             self.world.place_body(body, position, quaternion)
             self._neighbours.append((body, shape))
+
+    def take_off_table(self, neighbours: Sequence[int], the_object: bool = False) -> None:
+        """Take objects away, as an operator clears what a cell cannot use: the scene's other
+        objects at these indices (the order of :meth:`set_neighbours`) and, with ``the_object``,
+        the episode's own (set aside out of the world, asleep, until the next episode places it)."""
+        gone = set(neighbours)
+        for index in sorted(gone, reverse=True):
+            body, _ = self._neighbours.pop(index)
+            self.world.remove_body(body)
+        if the_object:
+            self.world.place_object(OUT_OF_THE_WORLD, yaw=0.0)
 
     @property
     def neighbour_shapes(self) -> List[ObjectShape]:
