@@ -164,6 +164,25 @@ def test_the_object_carried_to_the_drop_area_is_done_and_the_next_one_is_chosen(
     assert chosen_position(next_one) == pytest.approx((-0.62, -0.20))
 
 
+def test_an_object_lost_under_the_hand_in_the_drop_area_sends_the_hand_nowhere_else():
+    cell = Cell()
+    picked, other = found(-0.42, -0.10), found(-0.62, -0.20)
+    cell.frame(picked, other)
+    size = picked.detection.size
+    cell.between(tcp_at(-0.42, -0.10, HEIGHT / 2.0), size, 0.0)
+    assert cell.between(tcp_at(-0.42, -0.10, HEIGHT / 2.0 + 0.03), size, 0.0).state is TrackState.IN_HAND
+    goal = CLEARING.drop_slots[0][:2]
+    hover = tcp_at(goal[0], goal[1], HEIGHT + 0.07)  # let go, and hovering over it: it hides the object
+    assert cell.frame(other, tcp=hover, width=0.08, commanded=0.08).target.state is TrackState.HIDDEN
+    cell.stamp += TrackerSettings.from_yaml().hidden_timeout  # hidden too long: the tracker drops it
+    for _ in range(3):
+        held = cell.frame(other, tcp=hover, width=0.08, commanded=0.08)
+        assert isinstance(held.target, Refusal) and held.chosen_id == 0, held
+    # The hand gone: the next object.
+    away = tcp_at(goal[0], goal[1] - 0.1, HEIGHT + 0.2)
+    assert chosen_position(cell.frame(other, tcp=away, width=0.08, commanded=0.08)) == pytest.approx((-0.62, -0.20))
+
+
 def test_the_cells_next_chooses_at_once_and_that_object_is_followed():
     cell = Cell()
     first, second, third = found(-0.40, -0.10), found(-0.50, -0.15), found(-0.65, -0.25)

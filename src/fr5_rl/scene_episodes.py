@@ -42,11 +42,11 @@ def scene_generator(seed: int, scene: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([int(seed), int(scene), 54]))
 
 
-def scene_sizes(episode: Episode, settings: ClearingSettings, seed: int, scenes: int) -> List[int]:
-    """How many objects each of the first ``scenes`` scenes of a run holds (a run of them has
-    that many episodes)."""
+def scene_sizes(episode: Episode, settings: ClearingSettings, seed: int, scenes: int, first_scene: int = 0) -> List[int]:
+    """How many objects each of ``scenes`` scenes of a run holds, from ``first_scene`` on (a run of
+    them has that many episodes)."""
     clearing = TableClearing(episode, settings, seed)
-    return [len(clearing.draw(number)) for number in range(scenes)]
+    return [len(clearing.draw(number)) for number in range(first_scene, first_scene + scenes)]
 
 
 class TableClearing:
@@ -55,14 +55,15 @@ class TableClearing:
     :param episode: the simulated cell (its configuration: table, region, ``place`` limits).
     :param settings: ``config/clearing.yaml``.
     :param seed: the run's seed (scene k is drawn from :func:`scene_generator`).
+    :param first_scene: the first scene's number (to replay one of a run).
     """
 
-    def __init__(self, episode: Episode, settings: ClearingSettings, seed: int) -> None:
+    def __init__(self, episode: Episode, settings: ClearingSettings, seed: int, first_scene: int = 0) -> None:
         self.cfg, self.settings, self.seed = episode.cfg, settings, seed
         self.scene_settings = dataclasses.replace(SceneSettings.from_yaml(), count=list(settings.count),
                                                   min_gap=settings.min_gap, touching_share=0.0)
         self.upright_cos = math.cos(math.radians(self.cfg.place.knocked_over_angle_deg))
-        self.scene_number = -1
+        self.scene_number = first_scene - 1
         self.bodies: List[StandingBody] = []  # every object on the table now, the episode's target first
         self.placed: List[bool] = []  # by body: set down in the drop area by an episode
         self.slot = 0  # the next free drop slot

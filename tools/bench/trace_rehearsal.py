@@ -52,6 +52,8 @@ def listener(events: List[Event], period_s: float) -> Callable[[], List[Any]]:
         from std_msgs.msg import Float64, String
         from visualization_msgs.msg import Marker
 
+        from fr5_rl.msg import DetectedObjects
+
         import tf2_geometry_msgs  # noqa: F401  (registers PoseStamped with tf2's transform)
         import tf2_ros
 
@@ -78,6 +80,13 @@ def listener(events: List[Event], period_s: float) -> Callable[[], List[Any]]:
             by_name = dict(zip(message.name, message.position))
             if all(name in by_name for name in finger_names):
                 latest["fingers"] = sum(by_name[name] for name in finger_names)
+
+        def chosen(message) -> None:
+            # A clearing run: which object the detector gives the policy, and what else it sees.
+            picked = next((item for item in message.objects if item.id == message.chosen_id), None)
+            changed("chosen", "none" if picked is None else f"object {picked.id} ({picked.kind}) at "
+                    f"{pose_text(picked.pose, with_yaw=False)}; {len(message.objects)} seen, "
+                    f"{len(message.refused)} refused")
 
         def tick(_event) -> None:
             truth = latest.get("truth")
@@ -120,6 +129,7 @@ def listener(events: List[Event], period_s: float) -> Callable[[], List[Any]]:
             events.append((time.monotonic(), "poses", line))
 
         return [rospy.Subscriber("/fr5_sim/object", Marker, keep("truth"), queue_size=1),
+                rospy.Subscriber("/detector/objects", DetectedObjects, chosen, queue_size=5),
                 rospy.Subscriber("/fr5_policy/target_marker", Marker, keep("target"), queue_size=1),
                 rospy.Subscriber("/target_pose", PoseStamped, keep("detected"), queue_size=1),
                 rospy.Subscriber("/place_pose", PoseStamped, keep("goal"), queue_size=1),
@@ -155,6 +165,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--period", type=float, default=0.5, help="s between two lines of poses")
     parser.add_argument("--port", type=int, default=11490)
     parser.add_argument("--out", type=Path, help="also write the events as JSON lines")
+    parser.add_argument("--scene", type=int, help="clear the table: trace this scene of the seed's "
+                        "(sim_policy.launch scene:=clear first_scene:=K scenes:=1; --episodes: its objects)")
     args = parser.parse_args(argv)
     if args.episodes < 1 or args.period <= 0.0:
         parser.error("--episodes must be >= 1 and --period > 0")
@@ -164,6 +176,9 @@ def main(argv: Optional[List[str]] = None) -> int:
                  "driver": "fairino", "vision": True, "controller_port": args.port + 8700}
     if args.truth:
         arguments["vision_target"] = "truth"
+    if args.scene is not None:
+        arguments.update(scene="clear", first_scene=args.scene, scenes=1)
+        del arguments["episodes"]
     events: List[Event] = []
     run = run_launch(arguments, port=args.port, episodes=args.episodes, listen=listener(events, args.period),
                      node_name="trace_rehearsal")

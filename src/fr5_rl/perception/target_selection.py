@@ -93,6 +93,7 @@ class SceneTargetTracker:
         self.selection, self.done_clearance = selection, done_clearance
         self.last_objects: List[Tuple[int, SceneObjectFound]] = []  # the last frame's, with their ids
         self.pending: Optional[Tuple[float, float, float]] = None  # chosen by next_object(), not yet followed
+        self.set_down: Optional[Tuple[float, float, float]] = None  # lost under the hand in the drop area
         self.chosen_id = 0
         self.chosen_kind = ""
         self.position: Optional[Tuple[float, float, float]] = None  # where the tracker believes it (m, table)
@@ -137,6 +138,12 @@ class SceneTargetTracker:
         :param stamp: its capture time (s). The rest as :meth:`ObjectTracker.update` takes them.
         """
         objects = self.last_objects = self.scene_tracker.update(scene, stamp)
+        if self.set_down is not None:
+            if not self._hand_away(self.set_down, table_from_tcp):
+                return SceneFrame(Refusal(RefusalReason.NO_OBJECT, "the object set down in the drop area is lost "
+                                                                   "to the camera: waiting for the hand to leave it "
+                                                                   "(or ~next)"), objects, 0)
+            self.set_down = None
         match: Optional[Tuple[int, SceneObjectFound]] = None
         state = self.tracker.state
         if state is not TrackState.LOST and self.position is not None:
@@ -172,7 +179,12 @@ class SceneTargetTracker:
         if isinstance(target, TrackedObject):
             self.position = target.position_table
         elif self.tracker.state is TrackState.LOST:
+            lost_at = self.position
             self._forget()
+            if lost_at is not None and self.clearing.in_drop_area(lost_at[:2]) and not self._hand_away(lost_at, table_from_tcp):
+                # Lost where it was set down, under the hand (which hides it): not a reason to send
+                # the hand to the next object while the policy may still be letting go of this one.
+                self.set_down = tuple(lost_at)
         return SceneFrame(target, objects, self.chosen_id)
 
     def _hand_away(self, position: Sequence[float], table_from_tcp: Optional[np.ndarray]) -> bool:
@@ -187,6 +199,7 @@ class SceneTargetTracker:
     def _forget(self) -> None:
         self.tracker.reset()
         self.chosen_id, self.chosen_kind, self.position, self.pending = 0, "", None, None
+        self.set_down = None
 
     def _choose(self, objects: Sequence[Tuple[int, SceneObjectFound]]
                 ) -> Union[Tuple[int, SceneObjectFound], Refusal]:

@@ -112,10 +112,10 @@ class SimulatorNode:
             if not TASK_BLOCKS[task][1]:
                 raise ConfigError(f"sim_node: scene: clear sets each object down at a goal: it needs a model of the "
                                   f"task place, not {task}")
-            clearing = TableClearing(self.sim, ClearingSettings.from_yaml(), params.seed)
+            clearing = TableClearing(self.sim, ClearingSettings.from_yaml(), params.seed, params.first_scene)
             if params.scenes:
                 # Every object of a scene gets one record: N scenes are that many episodes.
-                sizes = scene_sizes(self.sim, clearing.settings, params.seed, params.scenes)
+                sizes = scene_sizes(self.sim, clearing.settings, params.seed, params.scenes, params.first_scene)
                 self.params = params = dataclasses.replace(params, episodes=sum(sizes))
                 rospy.loginfo(f"sim_node: clearing {params.scenes} scenes of {', '.join(map(str, sizes))} objects")
         self.spec = self.sim.robot_spec

@@ -60,14 +60,15 @@ class SimNodeParams:
     outcome_log: str
     scene: str = ""  # "": one object an episode; "clear": a scene of several, cleared one object an episode
     scenes: int = 0  # scene "clear": stop after this many scenes (0: run on, or ~episodes)
+    first_scene: int = 0  # scene "clear": start at this scene of the seed's (to replay one)
     neighbours_topic: str = ""  # scene "clear": the other objects, for the simulated camera (MarkerArray, base_link)
     cell_next_service: str = ""  # scene "clear": fr5_rl/NextObject (the detector's ~next): its answer is the next object judged
 
     def check(self, source: str) -> None:
         if self.scene not in ("", "clear"):
             raise ConfigError(f"{source}: 'scene' must be \"\" (one object) or clear, got {self.scene!r}")
-        if self.scenes < 0 or (self.scenes and not self.scene):
-            raise ConfigError(f"{source}: 'scenes' must be >= 0, and only counts with scene: clear")
+        if self.scenes < 0 or self.first_scene < 0 or ((self.scenes or self.first_scene) and not self.scene):
+            raise ConfigError(f"{source}: 'scenes' and 'first_scene' must be >= 0, and only count with scene: clear")
         if self.scene and self.lockstep:
             raise ConfigError(f"{source}: scene: clear runs in real time (its camera renders every object); "
                               "set ~lockstep false")
