@@ -130,6 +130,11 @@ def test_after_the_last_object_the_next_scene_comes(episode):
         assert clearing.scene_number == 0
         episode.start(10, {"scene": scene})
         clearing.finish(episode, verdict(False, "timeout"))
+        assert clearing.scene_number == 0 or len(episode.neighbour_poses()) == sizes[1]
+    # The next scene stands as soon as the last one is cleared: the camera shows it to the cell
+    # before it is asked which object is next.
+    assert clearing.scene_number == 1 and len(episode.neighbour_poses()) == sizes[1]
+    assert episode.object_pose().position[2] < -1.0
     scene = clearing.next_scene()
     assert clearing.scene_number == 1 and 1 + len(scene.others) == sizes[1]
     assert np.all([SETTINGS.in_pick_area(body.position[:2]) for body in (scene.target, *scene.others)])

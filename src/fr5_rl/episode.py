@@ -278,6 +278,14 @@ class Episode:
         """Take a scene's objects away between episodes (:meth:`fr5_rl.sim.plant.Plant.take_off_table`)."""
         self.plant.take_off_table(neighbours, the_object)
 
+    def show_scene(self, bodies: Sequence[Tuple[ObjectShape, float, Sequence[float], Sequence[float]]]) -> None:
+        """Between episodes: a new scene's objects (``(shape, mass, position, quaternion)``) stand
+        on the table, the episode's own object set aside, until the next episode picks one."""
+        friction = self.draws.object_friction if self.draws is not None else self.cfg.object.lateral_friction
+        self.plant.set_neighbours([(shape, mass, friction, position, quaternion)
+                                   for shape, mass, position, quaternion in bodies])
+        self.plant.take_off_table([], the_object=True)
+
     @property
     def neighbour_shapes(self) -> List[ObjectShape]:
         """A scene's other objects' kinds and sizes, in the scene's order."""

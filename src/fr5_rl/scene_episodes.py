@@ -63,6 +63,7 @@ class TableClearing:
         self.scene_settings = dataclasses.replace(SceneSettings.from_yaml(), count=list(settings.count),
                                                   min_gap=settings.min_gap, touching_share=0.0)
         self.upright_cos = math.cos(math.radians(self.cfg.place.knocked_over_angle_deg))
+        self.first_scene = first_scene
         self.scene_number = first_scene - 1
         self.bodies: List[StandingBody] = []  # every object on the table now, the episode's target first
         self.placed: List[bool] = []  # by body: set down in the drop area by an episode
@@ -95,10 +96,7 @@ class TableClearing:
         """
         left = self.pickable()
         if not left:
-            self.scene_number += 1
-            self.bodies = self.draw(self.scene_number)
-            self.placed = [False] * len(self.bodies)
-            self.slot, self.object_in_scene = 0, 0
+            self._new_scene()
             left = self.pickable()
         settings = self.settings
         index = None
@@ -165,7 +163,25 @@ class TableClearing:
         keep = [i for i in range(len(self.bodies)) if i not in gone]
         self.bodies = [self.bodies[i] for i in keep]
         self.placed = [self.placed[i] for i in keep]
+        if not self.pickable():
+            # The scene is cleared: the next one stands at once, so that the camera shows it to the
+            # cell before the cell is asked which object is next.
+            self._new_scene()
+            episode.show_scene([(body.shape, body.mass, body.position, body.quaternion) for body in self.bodies])
         return verdict, fields
+
+    def show_first_scene(self, episode: Episode) -> None:
+        """Before the run's first episode: its scene stands on the table, no object chosen yet
+        (a cell's camera then shows it to the cell, which is asked what is next)."""
+        if self.scene_number < self.first_scene:
+            self._new_scene()
+            episode.show_scene([(body.shape, body.mass, body.position, body.quaternion) for body in self.bodies])
+
+    def _new_scene(self) -> None:
+        self.scene_number += 1
+        self.bodies = self.draw(self.scene_number)
+        self.placed = [False] * len(self.bodies)
+        self.slot, self.object_in_scene = 0, 0
 
     def _lost(self, index: int) -> Optional[str]:
         """Why an object not placed can no longer be picked, or None: knocked over, carried into

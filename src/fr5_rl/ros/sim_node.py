@@ -85,6 +85,11 @@ from .sim_messages import joint_state_message, neighbour_markers, object_marker,
 from .lifetime import init_node
 
 
+# s: a clearing run's first episode waits this long at most for the cell's first choice (the
+# camera and the detector start with the launch); then the rule on the truth chooses.
+FIRST_CHOICE_WAIT = 30.0
+
+
 class SimulatorNode:
     """Runs one simulated episode (:class:`~fr5_rl.episode.Episode`) behind ROS topics, in real time or in lockstep with the policy.
 
@@ -132,6 +137,7 @@ class SimulatorNode:
         self.base_in_camera = np.linalg.inv(transform_in(static_transforms, self.spec.base_frame, params.camera_frame))
         self.base_in_goal_frame = np.linalg.inv(transform_in(static_transforms, self.spec.base_frame, params.goal_frame))
         self.rng = np.random.default_rng(params.seed)  # camera noise
+        self.started = time.monotonic()
         self.outcome_log: Optional[Path] = None
         if params.outcome_log:
             self.outcome_log = Path(params.outcome_log)
@@ -192,7 +198,12 @@ class SimulatorNode:
         rospy.Service("~reset", Trigger, self._on_reset)
         # Camera calibration (calibrate_camera.py): the cup fixed in the closed gripper, no episodes.
         rospy.Service("~calibration", SetBool, self._on_calibration)
-        if not params.lockstep:  # lockstep starts its first episode once the policy node is up
+        if clearing is not None and self.cell_next is not None:
+            # The first scene stands, and the first episode waits for the cell's choice of an
+            # object in it (start_episode), as every later one does.
+            clearing.show_first_scene(self.sim)
+            self.runner.hold_until = time.monotonic()
+        elif not params.lockstep:  # lockstep starts its first episode once the policy node is up
             with self.lock:
                 self.start_episode()
 
@@ -229,7 +240,12 @@ class SimulatorNode:
         runner = self.runner
         if not runner.next_start_keeps_the_arm and runner.episode > 0 and not self.params.lockstep:
             self._pause_policy_for_teleport()
-        runner.place_next(settle, self._ask_cell_for_the_next() if runner.clearing is not None else None)
+        chosen = self._ask_cell_for_the_next() if runner.clearing is not None else None
+        if chosen is None and runner.clearing is not None and self.cell_next is not None and runner.episode == 0 \
+                and time.monotonic() - self.started < FIRST_CHOICE_WAIT:
+            runner.hold_until = time.monotonic() + 0.5  # the camera and the detector are still starting: ask again
+            return
+        runner.place_next(settle, chosen)
         self.publish_object_and_goal()
         self.controller_command = None  # the controller's standing command applies anew
         if settle <= 0.0:
@@ -409,7 +425,9 @@ class SimulatorNode:
             try:
                 answers.append(self.cell_next())
             except (rospy.ServiceException, rospy.ROSException) as error:
-                rospy.logwarn_throttle(10.0, f"sim_node: no next object from {self.params.cell_next_service}: {error}")
+                # Before the first episode the detector may still be starting: that is no news.
+                log = rospy.logwarn_throttle if self.runner.episode > 0 else rospy.logdebug_throttle
+                log(10.0, f"sim_node: no next object from {self.params.cell_next_service}: {error}")
 
         # The loop holds the lock: a detector that does not answer must not stall the arm's states.
         caller = threading.Thread(target=ask, daemon=True)

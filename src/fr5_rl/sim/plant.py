@@ -190,7 +190,7 @@ class Plant:
         for index in sorted(gone, reverse=True):
             body, _ = self._neighbours.pop(index)
             self.world.remove_body(body)
-        if the_object:
+        if the_object and self.world.object_id is not None:
             self.world.place_object(OUT_OF_THE_WORLD, yaw=0.0)
 
     @property
