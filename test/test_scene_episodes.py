@@ -177,3 +177,18 @@ def test_another_object_carried_to_the_drop_area_fails_the_pick_and_is_counted(e
     assert [record["failure"] for record in clearing.extra_records] == ["other_object_placed"]
     # Neither the one judged nor the one carried off stays to be picked: one record each.
     assert 1 + len(clearing.next_scene().others) == count - 2
+
+
+def test_the_first_scene_stands_before_the_first_episode():
+    fresh = Episode.build("place")
+    try:
+        clearing = TableClearing(fresh, SETTINGS, 101)
+        clearing.show_first_scene(fresh)
+        drawn = clearing.draw(0)
+        assert [pose.position for pose in fresh.neighbour_poses()] == [pytest.approx(b.position) for b in drawn]
+        assert fresh.object_pose().position[2] < -1.0  # no object chosen yet
+        settle(fresh, 5)
+        scene = clearing.next_scene()
+        assert clearing.scene_number == 0 and 1 + len(scene.others) == len(drawn)
+    finally:
+        fresh.close()

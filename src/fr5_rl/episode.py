@@ -284,6 +284,9 @@ class Episode:
         friction = self.draws.object_friction if self.draws is not None else self.cfg.object.lateral_friction
         self.plant.set_neighbours([(shape, mass, friction, position, quaternion)
                                    for shape, mass, position, quaternion in bodies])
+        if self.plant.object_shape is None and bodies:  # before any episode: an object to set aside
+            shape, mass, position, _ = bodies[0]
+            self.plant.set_object(shape.kind, shape.dims, mass, friction, float(position[2]))
         self.plant.take_off_table([], the_object=True)
 
     @property
