@@ -183,6 +183,27 @@ def test_an_object_lost_under_the_hand_in_the_drop_area_sends_the_hand_nowhere_e
     assert chosen_position(cell.frame(other, tcp=away, width=0.08, commanded=0.08)) == pytest.approx((-0.62, -0.20))
 
 
+def test_an_object_hidden_too_long_is_looked_for_where_it_was_not_swapped_for_another():
+    cell = Cell()
+    chosen, other = found(-0.42, -0.10), found(-0.62, -0.20)
+    first = cell.frame(chosen, other)
+    assert chosen_position(first) == pytest.approx((-0.42, -0.10))
+    hidden_timeout = TrackerSettings.from_yaml().hidden_timeout
+    cell.stamp += hidden_timeout  # the arm hides it longer than the tracker waits
+    for _ in range(3):
+        lost = cell.frame(other)
+        assert isinstance(lost.target, Refusal) and lost.chosen_id == first.chosen_id, lost
+    # Seen again: the same object, not the other one.
+    again = cell.frame(chosen, other)
+    assert chosen_position(again) == pytest.approx((-0.42, -0.10))
+    # Gone for good: after reacquire_timeout the rule chooses anew.
+    cell.stamp += hidden_timeout
+    cell.frame(other)
+    cell.stamp += cell.selector.reacquire_timeout
+    cell.frame(other)
+    assert chosen_position(cell.frame(other)) == pytest.approx((-0.62, -0.20))
+
+
 def test_the_cells_next_chooses_at_once_and_that_object_is_followed():
     cell = Cell()
     first, second, third = found(-0.40, -0.10), found(-0.50, -0.15), found(-0.65, -0.25)

@@ -166,7 +166,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--port", type=int, default=11490)
     parser.add_argument("--out", type=Path, help="also write the events as JSON lines")
     parser.add_argument("--scene", type=int, help="clear the table: trace this scene of the seed's "
-                        "(sim_policy.launch scene:=clear first_scene:=K scenes:=1; --episodes: its objects)")
+                        "(sim_policy.launch scene:=clear first_scene:=K; --episodes: the objects to trace)")
+    parser.add_argument("--scenes", type=int, default=1, help="with --scene: this many scenes from it")
     args = parser.parse_args(argv)
     if args.episodes < 1 or args.period <= 0.0:
         parser.error("--episodes must be >= 1 and --period > 0")
@@ -177,7 +178,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     if args.truth:
         arguments["vision_target"] = "truth"
     if args.scene is not None:
-        arguments.update(scene="clear", first_scene=args.scene, scenes=1)
+        arguments.update(scene="clear", first_scene=args.scene, scenes=args.scenes)
         del arguments["episodes"]
     events: List[Event] = []
     run = run_launch(arguments, port=args.port, episodes=args.episodes, listen=listener(events, args.period),

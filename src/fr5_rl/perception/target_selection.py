@@ -81,16 +81,20 @@ class SceneTargetTracker:
     :param gate: m in the table plane: the detection of the tracked object's kind nearest where it
         is believed, this near, is it.
     :param selection: the first rule.
+    :param reacquire_timeout: s: an object the tracker lost outside the drop area (the arm hid it
+        too long) is looked for where it was this long, then the rule chooses anew.
     :param done_clearance: m: an object set down in the drop area is done once the tcp is this far
         from it (a policy letting go of it still needs it as its target), or when the cell's
         sequencer says so (:meth:`next_object`).
     """
 
     def __init__(self, tracker: ObjectTracker, scene_tracker: SceneTracker, clearing: ClearingSettings,
-                 gate: float, selection: Selection = Selection(), done_clearance: float = 0.12) -> None:
+                 gate: float, selection: Selection = Selection(), done_clearance: float = 0.12,
+                 reacquire_timeout: float = 10.0) -> None:
         selection.check()
         self.tracker, self.scene_tracker, self.clearing, self.gate = tracker, scene_tracker, clearing, gate
-        self.selection, self.done_clearance = selection, done_clearance
+        self.selection, self.done_clearance, self.reacquire_timeout = selection, done_clearance, reacquire_timeout
+        self.pending_since: Optional[float] = None  # when a lost object began to be looked for again (s)
         self.last_objects: List[Tuple[int, SceneObjectFound]] = []  # the last frame's, with their ids
         self.pending: Optional[Tuple[float, float, float]] = None  # chosen by next_object(), not yet followed
         self.set_down: Optional[Tuple[float, float, float]] = None  # lost under the hand in the drop area
@@ -155,12 +159,15 @@ class SceneTargetTracker:
                 match = None
         elif state is not TrackState.LOST:
             self._forget()
+        if self.pending is not None and self.pending_since is not None \
+                and stamp - self.pending_since > self.reacquire_timeout:
+            self._forget()  # lost, and not seen where it was for that long: gone
         if self.tracker.state is TrackState.LOST and self.pending is not None:
-            # Chosen by next_object(): that object, once a frame shows it.
+            # Chosen by next_object(), or lost on the way: that object, once a frame shows it.
             match = self._nearest(objects, self.chosen_kind, self.pending)
             if match is None:
-                return SceneFrame(Refusal(RefusalReason.OCCLUDED, f"object {self.chosen_id} ({self.chosen_kind}), "
-                                                                  f"chosen next, not seen whole"), objects, self.chosen_id)
+                return SceneFrame(Refusal(RefusalReason.OCCLUDED, f"object {self.chosen_id} ({self.chosen_kind}) "
+                                                                  f"not seen whole where it was"), objects, self.chosen_id)
             self.pending = None
         elif self.tracker.state is TrackState.LOST:
             self.chosen_id, self.chosen_kind = 0, ""
@@ -179,12 +186,19 @@ class SceneTargetTracker:
         if isinstance(target, TrackedObject):
             self.position = target.position_table
         elif self.tracker.state is TrackState.LOST:
-            lost_at = self.position
+            lost_at, lost_id, lost_kind = self.position, self.chosen_id, self.chosen_kind
             self._forget()
-            if lost_at is not None and self.clearing.in_drop_area(lost_at[:2]) and not self._hand_away(lost_at, table_from_tcp):
-                # Lost where it was set down, under the hand (which hides it): not a reason to send
-                # the hand to the next object while the policy may still be letting go of this one.
-                self.set_down = tuple(lost_at)
+            if lost_at is not None and self.clearing.in_drop_area(lost_at[:2]):
+                if not self._hand_away(lost_at, table_from_tcp):
+                    # Lost where it was set down, under the hand (which hides it): not a reason to send
+                    # the hand to the next object while the policy may still be letting go of this one.
+                    self.set_down = tuple(lost_at)
+            elif lost_at is not None:
+                # Lost on the way (the arm hid it longer than the tracker's hidden_timeout): the same
+                # object where it was, once a frame shows it, not the rule's next one. Choosing anew
+                # sent the hand to another object than the one the cell had named (stop 66).
+                self.chosen_id, self.chosen_kind = lost_id, lost_kind
+                self.pending, self.pending_since = tuple(lost_at), stamp
         return SceneFrame(target, objects, self.chosen_id)
 
     def _hand_away(self, position: Sequence[float], table_from_tcp: Optional[np.ndarray]) -> bool:
@@ -199,7 +213,7 @@ class SceneTargetTracker:
     def _forget(self) -> None:
         self.tracker.reset()
         self.chosen_id, self.chosen_kind, self.position, self.pending = 0, "", None, None
-        self.set_down = None
+        self.set_down, self.pending_since = None, None
 
     def _choose(self, objects: Sequence[Tuple[int, SceneObjectFound]]
                 ) -> Union[Tuple[int, SceneObjectFound], Refusal]:
