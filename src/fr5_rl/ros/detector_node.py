@@ -306,8 +306,9 @@ class DetectorNode:
 
             clearing = ClearingSettings.from_yaml()
             rule = clearing.rule if params.selection_rule == "clearing" else params.selection_rule
+            # Rule id starts with object 1 (the first one a frame shows): ~select names another.
             self.selector = SceneTargetTracker(self.tracker, self.scene_tracker, clearing, params.selection_gate,
-                                               Selection(rule, params.selection_kind, 1))
+                                               Selection(rule, params.selection_kind, 1 if rule == "id" else 0))
             rospy.Service("~select", SelectObject, self.on_select)
             rospy.Service("~next", NextObject, self.on_next)
         for topic in params.joint_states_topics:
