@@ -83,12 +83,12 @@ def found(x: float, y: float, kind: str = "cylinder", size: float = 0.05) -> Sce
 class Cell:
     """A selection fed frame after frame (no depth: the tracker keeps a hidden object as it is)."""
 
-    def __init__(self, selection=Selection()):
+    def __init__(self, selection=None):
         table = TableRegion.from_env(load_env_config())
         settings = TrackerSettings.from_yaml()
         self.tracker = ObjectTracker(settings, typed(DetectorSettings, load_yaml("detector")["detector"], "d"), table)
         self.selector = SceneTargetTracker(self.tracker, SceneTracker(0.02, settings.hidden_timeout), AT_BASE, 0.04,
-                                           selection)
+                                           selection or Selection())
         self.stamp = 0.0
 
     def frame(self, *objects, tcp=None, width=None, commanded=None):
