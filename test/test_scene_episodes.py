@@ -27,6 +27,20 @@ def verdict(success: bool, failure=None) -> EpisodeVerdict:
     return EpisodeVerdict(success, failure, True, False, 100, None)
 
 
+def first_episode(sim: Episode, scene_seed: int, episode_seed: int):
+    """A clearing run's first episode started: ``(clearing, its scene, objects in it)``."""
+    clearing = TableClearing(sim, SETTINGS, scene_seed)
+    first = clearing.next_scene()
+    sim.start(episode_seed, {"scene": first})
+    return clearing, first, 1 + len(first.others)
+
+
+def set_down_at_goal(sim: Episode, scene) -> None:
+    """The episode's object set down at its goal, upright at the goal's yaw, as a policy would."""
+    x, y, yaw = scene.goal
+    sim.plant.place_object((x, y), yaw)
+
+
 def settle(sim: Episode, periods: int = 25) -> None:
     """Let physics run with the arm held where it stands, the gripper open."""
     for _ in range(periods):
@@ -67,13 +81,8 @@ def test_each_episode_picks_by_the_rule_and_the_others_stand_around_it(episode):
 
 
 def test_a_placed_object_stays_and_the_next_goal_is_the_next_slot(episode):
-    clearing = TableClearing(episode, SETTINGS, 31)
-    first = clearing.next_scene()
-    count = 1 + len(first.others)
-    episode.start(7, {"scene": first})
-    # The object set down at its goal (as a policy would), upright at the goal's yaw.
-    x, y, yaw = first.goal
-    episode.plant.place_object((x, y), yaw)
+    clearing, first, count = first_episode(episode, 31, 7)
+    set_down_at_goal(episode, first)
     settle(episode)
     outcome, fields = clearing.finish(episode, verdict(True))
     assert outcome.success and fields == {"scene": 0, "object_in_scene": 0, "chosen_by": "rule", "knocked": []}
@@ -85,10 +94,7 @@ def test_a_placed_object_stays_and_the_next_goal_is_the_next_slot(episode):
 
 
 def test_an_object_not_placed_is_taken_off_the_table(episode):
-    clearing = TableClearing(episode, SETTINGS, 41)
-    first = clearing.next_scene()
-    count = 1 + len(first.others)
-    episode.start(8, {"scene": first})
+    clearing, first, count = first_episode(episode, 41, 8)
     settle(episode, 5)
     clearing.finish(episode, verdict(False, "timeout"))
     assert episode.object_pose().position[2] < -1.0  # off the table at once: the camera must not see it
@@ -98,12 +104,8 @@ def test_an_object_not_placed_is_taken_off_the_table(episode):
 
 
 def test_a_neighbour_knocked_over_fails_the_pick_and_gets_a_record_of_its_own(episode):
-    clearing = TableClearing(episode, SETTINGS, 51)
-    first = clearing.next_scene()
-    count = 1 + len(first.others)
-    episode.start(9, {"scene": first})
-    x, y, yaw = first.goal
-    episode.plant.place_object((x, y), yaw)
+    clearing, first, count = first_episode(episode, 51, 9)
+    set_down_at_goal(episode, first)
     # The arm knocked a neighbour onto its side.
     body = episode.plant._neighbours[0][0]
     other = first.others[0]
@@ -164,10 +166,7 @@ def test_the_object_the_cell_chose_is_the_one_judged(episode):
 
 
 def test_another_object_carried_to_the_drop_area_fails_the_pick_and_is_counted(episode):
-    clearing = TableClearing(episode, SETTINGS, 91)
-    first = clearing.next_scene()
-    count = 1 + len(first.others)
-    episode.start(11, {"scene": first})
+    clearing, first, count = first_episode(episode, 91, 11)
     body = episode.plant._neighbours[0][0]
     x, y, _ = first.goal
     episode.plant.world.place_body(body, (x, y, first.others[0].position[2]), (0.0, 0.0, 0.0, 1.0))

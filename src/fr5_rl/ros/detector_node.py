@@ -460,12 +460,9 @@ class DetectorNode:
         """With a selection: every object of the frame, the chosen one followed by the tracker
         (:class:`~fr5_rl.perception.target_selection.SceneTargetTracker`), and the report of
         them all on ``~objects_topic``."""
-        try:
-            transform = self.tf_buffer.lookup_transform(self.params.table_frame, color.header.frame_id, rospy.Time(0))
-        except TF_ERRORS as error:
-            return Refusal(RefusalReason.NO_TRANSFORM, f"{color.header.frame_id} -> {self.params.table_frame}: {error}")
-        t, r = transform.transform.translation, transform.transform.rotation
-        self.table_from_optical = matrix_from_quaternion((t.x, t.y, t.z), (r.x, r.y, r.z, r.w))
+        refusal = self.look_up_camera(color)
+        if refusal is not None:
+            return refusal
         scene = detect_scene(self.detector, self.scene_limits, depth_m, intrinsics, self.table_from_optical)
         stamp = color.header.stamp
         tcp, width = self.tcp_at(stamp), self.widths.at(stamp.to_sec())
@@ -507,13 +504,21 @@ class DetectorNode:
             return self.tracker.update(result, stamp.to_sec(), depth_m, intrinsics, self.table_from_optical, tcp,
                                        width, self.commanded.at(stamp.to_sec()))
 
-    def detect(self, rgb: np.ndarray, depth_m: np.ndarray, intrinsics, color: Image) -> Union[Detection, Refusal]:
+    def look_up_camera(self, color: Image) -> Optional[Refusal]:
+        """Place the image's optical frame in the table frame (:attr:`table_from_optical`) from
+        tf; the refusal when tf cannot."""
         try:
             transform = self.tf_buffer.lookup_transform(self.params.table_frame, color.header.frame_id, rospy.Time(0))
         except TF_ERRORS as error:
             return Refusal(RefusalReason.NO_TRANSFORM, f"{color.header.frame_id} -> {self.params.table_frame}: {error}")
         t, r = transform.transform.translation, transform.transform.rotation
         self.table_from_optical = matrix_from_quaternion((t.x, t.y, t.z), (r.x, r.y, r.z, r.w))
+        return None
+
+    def detect(self, rgb: np.ndarray, depth_m: np.ndarray, intrinsics, color: Image) -> Union[Detection, Refusal]:
+        refusal = self.look_up_camera(color)
+        if refusal is not None:
+            return refusal
         return self.detector.detect(depth_m, intrinsics, self.table_from_optical, rgb)
 
     def report_every_object(self, depth_m: np.ndarray, intrinsics: Intrinsics, color: Image) -> None:
