@@ -157,8 +157,6 @@ class SceneTargetTracker:
                     and self._hand_away(where, table_from_tcp):
                 self._forget()  # set down in the drop area, and the hand has left it: done
                 match = None
-        elif state is not TrackState.LOST:
-            self._forget()
         if self.pending is not None and self.pending_since is not None \
                 and stamp - self.pending_since > self.reacquire_timeout:
             self._forget()  # lost, and not seen where it was for that long: gone
