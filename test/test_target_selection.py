@@ -262,8 +262,3 @@ def test_a_selection_that_cannot_choose_is_refused(selection, message):
         cell.selector.select(selection)
     assert cell.selector.selection == Selection()  # the one before stands
 
-
-def test_settings_unchanged_by_a_selection():
-    # dataclasses are frozen: a selection cannot change the clearing settings it reads.
-    with pytest.raises(dataclasses.FrozenInstanceError):
-        CLEARING.rule = "kind"

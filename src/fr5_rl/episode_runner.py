@@ -90,7 +90,7 @@ class EpisodeRunner:
     def __init__(self, sim: Episode, driver: DriverModel, seed: int, go_to_start: bool, hold_after_episode: float,
                  clock: Callable[[], float] = time.monotonic, clearing: Optional[TableClearing] = None) -> None:
         self.sim, self.driver, self.seed, self.clearing = sim, driver, seed, clearing
-        self.extra_records: List[Dict[str, Any]] = []  # clearing: the last episode's knocked-over objects' records
+        self.extra_records: List[Dict[str, Any]] = []  # clearing: records of the objects the last episode lost
         self.go_to_start, self.hold_after_episode, self.clock = go_to_start, hold_after_episode, clock
         self.max_width = sim.robot_spec.max_opening_width
         self.lower, self.upper = sim.robot_spec.lower_limits, sim.robot_spec.upper_limits

@@ -6,17 +6,16 @@ a table rather than handle one object at a time:
 
 - a scene of ``config/clearing.yaml`` ``count`` objects stands in its pick area (drawn from the
   run's seed and the scene's number: :func:`fr5_rl.scenes.draw_scene`);
-- each episode's object is the next one by the clearing rule (:func:`fr5_rl.clearing.choose_next`
-  on the true poses: the same rule the detector's selection applies to what it measures); its goal
-  is the next free drop slot; the others stand around it, where the last episode left them;
-- the object is the cell's choice when the caller has one (the detector's ``~next``), else the
-  rule's on the true poses;
+- each episode's object is the cell's choice when the caller has one (the detector's ``~next``),
+  else the clearing rule's on the true poses (:func:`fr5_rl.clearing.choose_next`, the rule the
+  detector applies to what it measures); its goal is the next free drop slot; the others stand
+  around it, where the last episode left them;
 - after the episode, a neighbour the arm knocked over (tilted past ``place.knocked_over_angle_deg``)
   fails it (``knocked_neighbour``). An object the episode lost for the cell (knocked over,
   carried into the drop area instead of the one judged, pushed out of reach, off the table) gets a
   record of its own, and it and an object the episode did not place are taken off the table at
   once, as an operator would. So every object of a scene gets exactly one record;
-- once no object is left to pick, the next scene is drawn.
+- once no object is left to pick, the next scene stands at once (before the cell is asked).
 
 Only the task's own object is judged by the task; the rest is this module's.
 """
@@ -89,7 +88,7 @@ class TableClearing:
         nothing left to pick gives way to the next one.
 
         :param chosen_xy: where the cell's own choice stands (m, base_link: the detector's
-            selection, ``fr5_rl/DetectedObjects`` ``chosen_id``): the object to pick within
+            ``~next`` answer): the object to pick within
             ``CHOICE_GATE`` of it is the one judged. None, or none there: the clearing rule on the
             true poses (the camera may not see the one the rule names: the arm, or an object in
             front of it, hides it).
