@@ -9,7 +9,7 @@ ROBOT ?= fr5
 EPISODES ?= 5
 SCENE ?=
 
-.PHONY: setup demo test test-fast bench bench-grasp bench-vision bench-ray train meshes lint clean help
+.PHONY: setup demo test test-fast bench bench-grasp bench-vision bench-ray train models meshes lint clean help
 
 help:
 	@echo "make demo   - set up, then run the closed loop (simulator + policy) with the shipped model"
@@ -20,6 +20,7 @@ help:
 	@echo "make bench  - set up, then run the benchmarks; figures printed and written to bench/results/"
 	@echo "make bench-ray - set up, then the Ray Tune bench (1 vs 2 nodes, ASHA vs full); BENCH_ARGS=--quick"
 	@echo "make train  - set up, then train (TASK=reach|grasp|place ALGO=ppo|sac|td3|tqc ROBOT=fr3|fr5|fr10|fr16|fr20|fr30)"
+	@echo "make models - set up, then make an arm's whole model set (reach, grasp, place) with cards: ROBOT=fr10; resumes after a kill"
 	@echo "make meshes - set up, then regenerate urdf/ and meshes/ for every arm from config/robots/ and config/gripper.yaml"
 	@echo "make setup  - only the set-up"
 
@@ -74,6 +75,11 @@ bench-vision: setup
 
 train: setup
 	@$(ENV) rosrun fr5_rl train.py --task $(TASK) --algo $(ALGO) --robot $(ROBOT)
+
+# One arm's whole model set (config/recipes/model_set.yaml): models/<arm>/{reach,grasp,place} with
+# cards and held-out figures; runs in runs/models_<arm>/, and a second call resumes a killed one.
+models: setup
+	@$(ENV) rosrun fr5_rl make_models.py --robot $(ROBOT)
 
 meshes: setup
 	@$(ENV) python tools/generate_description.py

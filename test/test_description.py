@@ -474,6 +474,11 @@ def test_generator_reproduces_committed_files(tmp_path: Path) -> None:
     assert made == committed
     for name in made:
         assert (tmp_path / "meshes" / name).read_bytes() == (REPO / "meshes" / name).read_bytes(), name
+    cells = sorted(f.name for f in (tmp_path / "config").glob("static_transforms_*.yaml"))
+    assert cells == sorted(f.name for f in (REPO / "config").glob("static_transforms_*.yaml"))
+    for name in cells:
+        assert (tmp_path / "config" / name).read_bytes() == (REPO / "config" / name).read_bytes(), \
+            f"config/{name} differs from the generator output: run make meshes"
 
 
 @pytest.mark.parametrize("name", ROBOTS)

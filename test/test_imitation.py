@@ -113,3 +113,58 @@ def test_a_run_with_workers_gives_a_loadable_model(tmp_path):
     summary = json.loads((run / "summary.json").read_text())
     assert [h["round"] for h in summary["history"]] == [0, 1]
     assert load_policy(run / "final", "torch").observation_size == 24
+
+
+def _tiny(run, *extra):
+    return imitate.main(["--task", "grasp", "--episodes", "2", "--epochs", "2", "--eval-episodes", "1",
+                         "--seed", "5", "--run-dir", str(run), *extra])
+
+
+def _actor_weights(run):
+    return load_policy(run / "final", "torch").model.policy.state_dict()
+
+
+def test_a_run_stopped_after_a_round_resumes_into_the_unbroken_run(tmp_path):
+    """A run that finished 1 round and is resumed to 3 labels, fits and ends as one run of 3
+    (the data set, the generator and the actor all come back)."""
+    import torch
+
+    assert _tiny(tmp_path / "whole", "--rounds", "3") == 0
+    assert _tiny(tmp_path / "broken", "--rounds", "1") == 0
+    assert _tiny(tmp_path / "broken", "--rounds", "3", "--resume") == 0
+    whole = json.loads((tmp_path / "whole" / "summary.json").read_text())["history"]
+    resumed = json.loads((tmp_path / "broken" / "summary.json").read_text())["history"]
+    assert [h["round"] for h in resumed] == [0, 1, 2, 3]
+    assert [h["samples"] for h in resumed] == [h["samples"] for h in whole]
+    assert [h["fit_loss"] for h in resumed[1:]] == pytest.approx([h["fit_loss"] for h in whole[1:]])
+    for name, value in _actor_weights(tmp_path / "whole").items():
+        assert torch.equal(value, _actor_weights(tmp_path / "broken")[name]), name
+
+
+def test_a_run_killed_between_rounds_resumes_from_the_last_round_it_finished(tmp_path):
+    """The state written after round 1's data joined the set, with round 2 never begun (as a
+    kill during round 2's fit leaves it): the resume continues at round 2."""
+    run = tmp_path / "run"
+    assert _tiny(run, "--rounds", "2") == 0
+    state_path = run / imitation.STATE_DIR / imitation.STATE_FILE
+    state = json.loads(state_path.read_text())
+    assert state["finished"] == 2 and state["next_round"] == 2
+    # Round 2's fit never happened: drop it from the record, as a kill during it leaves it.
+    state["finished"] = None
+    state["history"] = state["history"][:2]
+    state_path.write_text(json.dumps(state))
+    assert _tiny(run, "--rounds", "2", "--resume") == 0
+    history = json.loads((run / "summary.json").read_text())["history"]
+    assert [h["round"] for h in history] == [0, 1, 2]
+
+
+def test_resume_refuses_another_run_and_a_run_with_nothing_done(tmp_path, capsys):
+    run = tmp_path / "run"
+    assert _tiny(run, "--rounds", "1", "--resume") == 2
+    assert "no finished DAgger round to resume" in capsys.readouterr().err
+    assert _tiny(run, "--rounds", "1") == 0
+    assert imitate.main(["--task", "grasp", "--episodes", "3", "--epochs", "2", "--eval-episodes", "1",
+                         "--seed", "5", "--run-dir", str(run), "--rounds", "2", "--resume"]) == 2
+    assert "episodes 2 (given 3)" in capsys.readouterr().err
+    assert imitate.main(["--resume"]) == 2
+    assert "--resume needs --run-dir" in capsys.readouterr().err

@@ -101,7 +101,8 @@ def test_a_saved_model_directory_is_an_ordinary_one_not_private(tmp_path):
     assert (tmp_path / "final").stat().st_mode & 0o777 == 0o777 & ~umask
 
 
-@pytest.mark.parametrize("module", ["train", "evaluate", "imitate", "tune", "export_onnx", "compare_run", "fit_driver"])
+@pytest.mark.parametrize("module", ["train", "evaluate", "imitate", "make_models", "tune", "export_onnx", "compare_run",
+                                    "fit_driver"])
 def test_help_is_plain_text(module, capsys):
     """--help shows no reStructuredText markup (the docstrings' ``code`` and :class:`roles`)."""
     import importlib

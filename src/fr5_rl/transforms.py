@@ -3,11 +3,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, List, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .config import ConfigError, load_typed
+from .config import DEFAULT_ROBOT, ConfigError, config_path, load_typed
 from .kinematics import rotation_from_rpy
 
 
@@ -97,16 +97,37 @@ def matrix_from_quaternion(xyz, quaternion) -> np.ndarray:
     return matrix
 
 
-def load_static_transforms(path: str | Path = "static_transforms") -> List[Dict]:
+SHIPPED_TRANSFORMS = "static_transforms"  # the shipped cell's file: the FR5's, or each arm's own
+
+
+def transforms_of_arm(path: str | Path, robot: Optional[str]) -> str | Path:
+    """``path``, unless it is the shipped cell's file (``static_transforms``, by name or as
+    ``config/static_transforms.yaml``) and ``robot`` is another arm than the FR5: then that arm's
+    cell, ``static_transforms_<robot>`` (its camera in front of its own placement region, its
+    table), which the FR5's would miss. A file of one's own (a calibration) is kept as it is, and
+    so is any file for a name that is not one of the family's (a vendor's URDF's, say)."""
+    from .config import robot_names
+
+    if robot in (None, DEFAULT_ROBOT) or robot not in robot_names():
+        return path
+    shipped = str(path) == SHIPPED_TRANSFORMS or (
+        str(path).endswith(".yaml") and Path(path).resolve() == config_path(SHIPPED_TRANSFORMS).resolve())
+    return f"{SHIPPED_TRANSFORMS}_{robot}" if shipped else path
+
+
+def load_static_transforms(path: str | Path = SHIPPED_TRANSFORMS, robot: Optional[str] = None) -> List[Dict]:
     """Entries of ``config/static_transforms.yaml`` (or ``path``: a path, or a name in ``config/``,
     e.g. ``camera_frames``), checked by :class:`StaticTransforms`: dicts with parent, child,
-    xyz (m), rpy (rad), matrix (4x4)."""
-    table = load_typed(StaticTransforms, path)
+    xyz (m), rpy (rad), matrix (4x4).
+
+    :param robot: the arm on the cell: the shipped file stands for its own (:func:`transforms_of_arm`).
+    """
+    table = load_typed(StaticTransforms, transforms_of_arm(path, robot))
     return [{"parent": item.parent, "child": item.child, "xyz": item.xyz, "rpy": item.rpy,
              "matrix": matrix_from_xyz_rpy(item.xyz, item.rpy)} for item in table.transforms]
 
 
-def load_transform_files(paths: Sequence[str | Path]) -> List[Dict]:
+def load_transform_files(paths: Sequence[str | Path], robot: Optional[str] = None) -> List[Dict]:
     """The entries of several transform files (paths, or names in ``config/``), in order, as one
     table, as :func:`load_static_transforms` gives them plus ``source`` (the path or name it
     came from, as given). A child frame listed in two files is
@@ -114,12 +135,13 @@ def load_transform_files(paths: Sequence[str | Path]) -> List[Dict]:
     optical frame, which the camera driver publishes).
 
     :param paths: the files, e.g. ``["static_transforms", "camera_frames"]``.
+    :param robot: the arm on the cell: the shipped file stands for its own (:func:`transforms_of_arm`).
     :raises ConfigError: a file is missing or wrong, or two files set the same child frame.
     """
     entries: List[Dict] = []
     owner: Dict[str, str] = {}
     for path in paths:
-        for entry in load_static_transforms(path):
+        for entry in load_static_transforms(path, robot):
             if entry["child"] in owner:
                 raise ConfigError(f"{entry['child']} has a parent in both {owner[entry['child']]} and {path}: "
                                   "tf allows one parent per frame")

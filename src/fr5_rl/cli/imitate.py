@@ -34,6 +34,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="processes rolling out and evaluating episodes (1: serially, in this one)")
     parser.add_argument("--robot", choices=robot_names(), default=None,
                         help="the arm (config/robots/); default: the DAgger file's env.robot, else fr5")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue --run-dir from the last round it finished (same options as it began with)")
     return parser
 
 
@@ -42,13 +44,15 @@ def dagger_run(args: argparse.Namespace) -> DaggerRun:
     return DaggerRun(task=args.task, hyperparams=args.hyperparams, run_dir=args.run_dir, seed=args.seed,
                      rounds=args.rounds, episodes=args.episodes, epochs=args.epochs,
                      eval_episodes=args.eval_episodes, torch_threads=args.torch_threads, robot=args.robot,
-                     workers=args.workers)
+                     workers=args.workers, resume=args.resume)
 
 
 def main(argv: Optional[List[str]] = None) -> int:
     args = build_parser().parse_args(script_args(argv))
     if args.workers < 1:
         return fail("imitate.py", ValueError(f"--workers must be at least 1, got {args.workers}"))
+    if args.resume and args.run_dir is None:
+        return fail("imitate.py", ValueError("--resume needs --run-dir: the run to continue"))
     from ..training.imitation import run_dagger
 
     try:

@@ -82,8 +82,8 @@ class Calibration:
     def __init__(self, settings: CalibrationSettings, mount_config: str, robot: str = DEFAULT_ROBOT) -> None:
         self.settings = settings
         self.robot = load_robot_spec(robot)
-        self.mount_entries = load_static_transforms(mount_config)
-        entries = load_transform_files([mount_config, settings.frames_config])
+        self.mount_entries = load_static_transforms(mount_config, robot)
+        entries = load_transform_files([mount_config, settings.frames_config], robot)
         self.mount = transform_in(entries, settings.base_frame, settings.mount_frame)
         self.mount_from_optical = transform_in(load_transform_files([settings.frames_config]), settings.mount_frame,
                                                settings.optical_frame)

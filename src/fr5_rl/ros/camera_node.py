@@ -124,16 +124,18 @@ class CameraNodeParams:
     camera_info_topic: str
     depth_camera_info_topic: str
 
-    def transforms(self) -> Tuple[np.ndarray, List[Dict]]:
+    def transforms(self, robot: Optional[str] = None) -> Tuple[np.ndarray, List[Dict]]:
         """Read the frames once: ``~frame_id``'s pose in ``~base_frame`` (4x4, m), the mount and
         then the camera's chain, the same transforms tf carries, so the picture is taken where
         tf says it is, unless ``~mount_offset`` moves the render pose (not the entries) off it;
         and the chain's entries (``~frames_config``), for /tf_static.
 
+        :param robot: the arm on the cell: the shipped mount file stands for its own.
+
         :raises ConfigError: a file is wrong, a frame has a parent in both files, the chain does
             not give ``frame_id`` a parent, or the files do not connect it to ``base_frame``.
         """
-        entries = load_transform_files([self.mount_config, self.frames_config])
+        entries = load_transform_files([self.mount_config, self.frames_config], robot)
         frames = [entry for entry in entries if entry["source"] == self.frames_config]
         if self.frame_id not in {entry["child"] for entry in frames}:
             raise ConfigError(f"{self.frames_config}: no transform to the camera's frame_id {self.frame_id}")
@@ -181,7 +183,7 @@ class CameraNode:
         robot = robot_name(rospy.get_param("/robot_description")) if rospy.has_param("/robot_description") \
             else DEFAULT_ROBOT
         spec = load_robot_spec(robot)
-        render_pose, camera_frames = params.transforms()
+        render_pose, camera_frames = params.transforms(robot)
         arguments = (load_env_config({"robot": robot}), list(spec.joint_names) + list(spec.finger_joint_names), render_pose,
                      self.intrinsics.opengl_projection(params.near, params.far),
                      params.width, params.height, params.near, params.far)

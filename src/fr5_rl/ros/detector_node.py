@@ -60,7 +60,7 @@ from shape_msgs.msg import SolidPrimitive
 from std_msgs.msg import Float64, Float64MultiArray, String
 from visualization_msgs.msg import MarkerArray
 
-from ..config import ConfigError, load_robot_spec
+from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec, robot_names
 from ..deploy.joint_state import JointStateReader
 from ..env_config import load_env_config
 from ..perception.camera_model import Intrinsics
@@ -78,6 +78,7 @@ from ..transforms import matrix_from_quaternion, quaternion_from_matrix
 from .images import image_message
 from .params import exit_if_help_asked, node_parameters
 from .lifetime import init_node
+from .robot_description import robot_name
 from .object_messages import detected_objects_message, detected_object_markers, primitive_from_shape
 
 TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.ExtrapolationException,
@@ -269,14 +270,19 @@ class DetectorNode:
 
     def __init__(self) -> None:
         self.params = params = node_parameters(DetectorNodeParams, "detector")
-        table = TableRegion.from_env(load_env_config())  # the table and the placement region: env.yaml's
+        # The arm the launch describes (robot_description.py names the URDF after it): its cell's
+        # table and placement region, and its fingers.
+        robot = robot_name(rospy.get_param("/robot_description")) if rospy.has_param("/robot_description") else None
+        robot = robot if robot in robot_names() else DEFAULT_ROBOT
+        cell = load_env_config({"robot": robot})
+        table = TableRegion.from_env(cell)
         self.detector = ObjectDetector(params.detector, table)
         self.tracker = ObjectTracker(params.tracker, params.detector, table)
         self.tracker_lock = threading.Lock()  # frames and the between-frames hand check
         self.last_refusal: Optional[RefusalReason] = None
         self.last_track: Optional[TrackState] = None
         # Recent openings by stamp, to read the opening at an image's stamp.
-        self.widths = FingerWidths(load_robot_spec().finger_joint_names, 400)
+        self.widths = FingerWidths(load_robot_spec(robot).finger_joint_names, 400)
         self.commanded = CommandedWidths(200)
         self.warned_no_hand = False
         self.started = time.monotonic()
@@ -291,7 +297,7 @@ class DetectorNode:
         self.timing_pub = rospy.Publisher("~timing", Float64MultiArray, queue_size=10)
         self.objects_pub = self.markers_pub = self.selector = None
         if params.objects_topic or params.selection_rule:
-            self.scene_limits = SceneLimits.from_objects(load_env_config().object.variety,
+            self.scene_limits = SceneLimits.from_objects(cell.object.variety,
                                                          SceneSettings.from_yaml().rectangular_min_difference,
                                                          params.scene)
             self.scene_tracker = SceneTracker(params.objects_gate, params.tracker.hidden_timeout)

@@ -133,7 +133,8 @@ class SimulatorNode:
         # The driver: its servo cycle and response (a driver profile's; none by default).
         self.driver = DriverModel(params.servo_rate, params.servo_delay_cycles, params.response_time_constant_s,
                                   self.physics_dt, self.spec.home_joint_positions)
-        static_transforms = load_static_transforms()
+        # The cell's own frames (the arm's: another arm's table and camera stand elsewhere).
+        static_transforms = load_static_transforms(robot=self.spec.model)
         self.base_in_camera = np.linalg.inv(transform_in(static_transforms, self.spec.base_frame, params.camera_frame))
         self.base_in_goal_frame = np.linalg.inv(transform_in(static_transforms, self.spec.base_frame, params.goal_frame))
         self.rng = np.random.default_rng(params.seed)  # camera noise

@@ -6,7 +6,8 @@ before, so every transform of every file goes out in a single call. Parameters:
 - ``~config`` (str or list of str): a transforms file, or several (paths or names in config/),
   e.g. ``[static_transforms, camera_frames]`` when the camera driver's ``publish_tf`` is false;
   default: the package's config/static_transforms.yaml. A frame given a parent in two files is
-  refused.
+  refused. For an arm other than the FR5 (``/robot_description``'s), the shipped file stands for
+  that arm's cell, config/static_transforms_<arm>.yaml.
 - ``~warn_simulator_mount`` (bool, default false; real_policy.launch: true): while a file still
   carries ``simulator_default: true`` (the shipped camera mount, the simulator's), log a loud
   warning at start and every minute: on a real cell the camera is somewhere else.
@@ -21,9 +22,10 @@ import tf2_ros
 from geometry_msgs.msg import TransformStamped
 
 from ..config import ConfigError, load_typed
-from ..transforms import StaticTransforms, load_transform_files, quaternion_from_matrix
+from ..transforms import SHIPPED_TRANSFORMS, StaticTransforms, load_transform_files, quaternion_from_matrix, transforms_of_arm
 from .params import exit_if_help_asked
 from .lifetime import init_node
+from .robot_description import robot_name
 
 
 def to_messages(entries: Sequence[Dict], stamp: rospy.Time) -> List[TransformStamped]:
@@ -80,7 +82,10 @@ def main() -> None:
                        "config/, or a list of them (default: static_transforms)")
     init_node("static_transforms")
     try:
-        files = config_files(rospy.get_param("~config", "static_transforms"))
+        files = config_files(rospy.get_param("~config", SHIPPED_TRANSFORMS))
+        # The arm the launch describes: the shipped cell's file stands for that arm's own.
+        robot = robot_name(rospy.get_param("/robot_description")) if rospy.has_param("/robot_description") else None
+        files = [str(transforms_of_arm(path, robot)) for path in files]
         entries = load_transform_files(files)
         uncalibrated = simulator_mount_files(files, entries) if rospy.get_param("~warn_simulator_mount", False) else []
     except ConfigError as error:

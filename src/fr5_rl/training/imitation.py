@@ -20,11 +20,82 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..config import typed
+from ..config import ConfigError, typed
 from ..deploy.bundle import build_meta, machine_description, save_model_dir, write_json_atomic
 from .hyperparameters import DaggerConfig, hyperparameter_path, read_hyperparameter_file
 from .run_settings import DaggerRun
 from .train import EVAL_SEED_OFFSET
+
+
+STATE_DIR = "dagger_state"  # in the run directory: what ``--resume`` continues from
+STATE_FILE = "state.json"
+
+
+class DaggerCheckpoint:
+    """A DAgger run's state between rounds, in ``run_dir/dagger_state/``: the data set so far, the
+    actor's weights, the history and the random generator's state.
+
+    Written after each round's new data joined the set; ``state.json`` goes last and names the
+    other two files, so a run killed mid-write resumes from the round before.
+
+    :param run_dir: the run directory.
+    """
+
+    def __init__(self, run_dir: Path) -> None:
+        self.directory = Path(run_dir) / STATE_DIR
+
+    def save(self, next_round: int, observations: np.ndarray, labels: np.ndarray, model: Optional[Any],
+             history: List[Dict[str, Any]], best: Tuple[float, Optional[int]], rng: np.random.Generator,
+             elapsed_s: float, identity: Dict[str, Any], finished: Optional[int] = None) -> None:
+        """Record what round ``next_round`` starts from; ``finished``: the run's last round, fitted
+        and judged, whose learner has not rolled out (a resume with more rounds does that first)."""
+        import torch
+
+        self.directory.mkdir(parents=True, exist_ok=True)
+        data_name = f"data_{next_round}.npz"
+        weights_name = f"actor_{next_round}.pt" if model is not None else None  # none before round 1
+        with open(self.directory / (data_name + ".tmp"), "wb") as handle:
+            np.savez(handle, observations=observations, labels=labels)
+        (self.directory / (data_name + ".tmp")).replace(self.directory / data_name)
+        if weights_name:
+            torch.save(model.policy.state_dict(), self.directory / (weights_name + ".tmp"))
+            (self.directory / (weights_name + ".tmp")).replace(self.directory / weights_name)
+        write_json_atomic(self.directory / STATE_FILE, {
+            "next_round": next_round, "data": data_name, "actor": weights_name, "history": history,
+            "best_score": best[0], "best_round": best[1], "rng": rng.bit_generator.state,
+            "elapsed_s": elapsed_s, "run": identity, "finished": finished})
+        for old in self.directory.glob("*_*.*"):
+            if old.name not in (data_name, weights_name):
+                old.unlink()
+
+    def exists(self) -> bool:
+        """Whether a round finished, so that the run can resume."""
+        return (self.directory / STATE_FILE).is_file()
+
+    def load(self, identity: Dict[str, Any]) -> Dict[str, Any]:
+        """The saved state, with ``observations``, ``labels`` and ``actor`` (a state dict) loaded.
+
+        :raises ConfigError: nothing to resume, or the run began with other settings.
+        """
+        import json
+
+        import torch
+
+        path = self.directory / STATE_FILE
+        if not path.is_file():
+            raise ConfigError(f"{self.directory.parent} has no finished DAgger round to resume ({path} is missing); "
+                              "start it again without --resume")
+        state = json.loads(path.read_text())
+        differing = {key: (state["run"].get(key), value) for key, value in identity.items()
+                     if state["run"].get(key) != value}
+        if differing:
+            raise ConfigError("this run began with other settings; resume it with the ones it began with: "
+                              + ", ".join(f"{key} {was!r} (given {now!r})" for key, (was, now) in differing.items()))
+        with np.load(self.directory / state["data"]) as data:
+            state["observations"], state["labels"] = data["observations"], data["labels"]
+        if state["actor"]:
+            state["actor"] = torch.load(self.directory / state["actor"], map_location="cpu")
+        return state
 
 
 def rollouts(env, expert, learner, episodes: int, seed: int, expert_probability: float,
@@ -259,7 +330,8 @@ def evaluate(env, learner, episodes: int, seed: int) -> float:
 def run_dagger(run: DaggerRun) -> int:
     """Run DAgger with ``run``'s settings (the command line's: :mod:`fr5_rl.cli.imitate`); returns 0.
 
-    :raises ConfigError: the DAgger file is malformed.
+    :raises ConfigError: the DAgger file is malformed; ``run.resume`` finds no round to resume from,
+        or a run begun with other settings.
     """
     import torch
 
@@ -300,56 +372,88 @@ def run_dagger(run: DaggerRun) -> int:
             return rollouts(env, expert, learner, episodes, round_seed, expert_probability, rng)
         return workers.rollouts(learner, episodes, round_seed, expert_probability, rng)
 
-    observations, labels, expert_success = roll_out(None, run.seed, 1.0)
-    print(f"round 0: expert demonstrations, {len(observations)} samples, expert success {expert_success:.0%}")
-    history = [{"round": 0, "samples": len(observations), "driver_success": expert_success,
-                "wall_s": round(time.time() - t_start, 1)}]
+    checkpoint = DaggerCheckpoint(run_dir)
+    # What must match for a resumed run to continue the same one (the rounds may grow).
+    identity = {"task": run.task, "hyperparams": name, "seed": run.seed, "episodes": episodes, "epochs": epochs,
+                "workers": run.workers, "robot": env.cfg.robot}
     model = venv = None
-    best = (-1.0, None)
-    for round_index in range(1, rounds + 1):
-        normaliser = Normaliser(observations)
-        if model is None:
-            model, venv = build_model_and_stats(run.task, env_overrides, config.algo_kwargs, normaliser, run.seed)
-        loss = fit(model, normaliser, observations, labels, epochs, seed=run.seed + round_index,
-                   learning_rate=dagger.learning_rate, schedule=dagger.learning_rate_schedule,
-                   gripper_loss_weight=dagger.gripper_loss_weight)
-        learner = make_learner(model, normaliser)
-        if workers is None:
-            rates = {name: evaluate(e, learner, run.eval_episodes, run.seed + EVAL_SEED_OFFSET)
-                     for name, e in eval_envs.items()}
-        else:
-            rates = {name: workers.evaluate(name, learner, run.eval_episodes, run.seed + EVAL_SEED_OFFSET)
-                     for name in eval_envs}
-        success = sum(rates.values()) / len(rates)
-        sync_stats(venv, normaliser)
-        meta = build_meta(run.task, "ppo", env_overrides, env.cfg, env.observation_space.shape[0],
-                          env.action_space.shape[0], env.control_dt, run.seed, trained_by="dagger",
-                          num_timesteps=int(len(observations)), dagger_round=round_index)
-        if success > best[0]:
-            best = (success, round_index)
-            save_model_dir(run_dir / "best", model, venv, meta)
-        save_model_dir(run_dir / "final", model, venv, meta)
-        history.append({"round": round_index, "samples": int(len(observations)), "fit_loss": loss,
-                        "eval_success": rates["task"], "eval_success_training_env": rates.get("training_env"),
-                        "wall_s": round(time.time() - t_start, 1)})
-        print(f"round {round_index}: {len(observations)} samples, loss {loss:.4f}, learner success "
-              + ", ".join(f"{rate:.0%} ({name})" for name, rate in rates.items())
-              + f" on {run.eval_episodes} episodes")
-        write_json_atomic(run_dir / "summary.json", {
-            "task": run.task, "method": "dagger", "history": history, "best_round": best[1],
-            "best_score": best[0], "wall_time_s": round(time.time() - t_start, 1),
-            "machine": machine_description(), "seed": run.seed})
-        if round_index == rounds:
-            break
-        # The learner drives (with a decaying share of expert steps), the expert labels.
-        beta = dagger.expert_share_decay ** round_index
-        new_obs, new_labels, _ = roll_out(learner, run.seed + 1000 * round_index, beta)
-        observations = np.concatenate([observations, new_obs])
-        labels = np.concatenate([labels, new_labels])
-    if workers is not None:
-        workers.close()
-    env.close()
-    for e in eval_envs.values():
-        e.close()
+    saved_actor = None
+    # A round fitted and judged whose learner has not rolled out yet: the last round of a run that
+    # finished, resumed with more rounds.
+    fitted_round = None
+    if run.resume:
+        state = checkpoint.load(identity)
+        observations, labels, history = state["observations"], state["labels"], state["history"]
+        best = (state["best_score"], state["best_round"])
+        rng.bit_generator.state = state["rng"]
+        first_round, saved_actor, fitted_round = state["next_round"], state["actor"], state.get("finished")
+        t_start = time.time() - state["elapsed_s"]
+        print(f"resuming {run_dir} at round {first_round} ({len(observations)} samples)")
+    else:
+        observations, labels, expert_success = roll_out(None, run.seed, 1.0)
+        print(f"round 0: expert demonstrations, {len(observations)} samples, expert success {expert_success:.0%}")
+        history = [{"round": 0, "samples": len(observations), "driver_success": expert_success,
+                    "wall_s": round(time.time() - t_start, 1)}]
+        best = (-1.0, None)
+        first_round = 1
+        checkpoint.save(first_round, observations, labels, None, history, best, rng,
+                        time.time() - t_start, identity)
+    try:
+        for round_index in range(first_round, rounds + 1):
+            normaliser = Normaliser(observations)
+            if model is None:
+                model, venv = build_model_and_stats(run.task, env_overrides, config.algo_kwargs, normaliser, run.seed)
+                if saved_actor:
+                    model.policy.load_state_dict(saved_actor)
+            if round_index != fitted_round:
+                loss = fit(model, normaliser, observations, labels, epochs, seed=run.seed + round_index,
+                           learning_rate=dagger.learning_rate, schedule=dagger.learning_rate_schedule,
+                           gripper_loss_weight=dagger.gripper_loss_weight)
+                learner = make_learner(model, normaliser)
+                if workers is None:
+                    rates = {name: evaluate(e, learner, run.eval_episodes, run.seed + EVAL_SEED_OFFSET)
+                             for name, e in eval_envs.items()}
+                else:
+                    rates = {name: workers.evaluate(name, learner, run.eval_episodes, run.seed + EVAL_SEED_OFFSET)
+                             for name in eval_envs}
+                success = sum(rates.values()) / len(rates)
+                sync_stats(venv, normaliser)
+                meta = build_meta(run.task, "ppo", env_overrides, env.cfg, env.observation_space.shape[0],
+                                  env.action_space.shape[0], env.control_dt, run.seed, trained_by="dagger",
+                                  num_timesteps=int(len(observations)), dagger_round=round_index)
+                if success > best[0]:
+                    best = (success, round_index)
+                    save_model_dir(run_dir / "best", model, venv, meta)
+                save_model_dir(run_dir / "final", model, venv, meta)
+                history.append({"round": round_index, "samples": int(len(observations)), "fit_loss": loss,
+                                "eval_success": rates["task"], "eval_success_training_env": rates.get("training_env"),
+                                "wall_s": round(time.time() - t_start, 1)})
+                print(f"round {round_index}: {len(observations)} samples, loss {loss:.4f}, learner success "
+                      + ", ".join(f"{rate:.0%} ({name})" for name, rate in rates.items())
+                      + f" on {run.eval_episodes} episodes")
+                write_json_atomic(run_dir / "summary.json", {
+                    "task": run.task, "method": "dagger", "history": history, "best_round": best[1],
+                    "best_score": best[0], "wall_time_s": round(time.time() - t_start, 1),
+                    "machine": machine_description(), "seed": run.seed})
+            else:
+                learner = make_learner(model, normaliser)
+            if round_index == rounds:
+                # Finished: a resume with more rounds rolls this learner out first.
+                checkpoint.save(round_index, observations, labels, model, history, best, rng,
+                                time.time() - t_start, identity, finished=round_index)
+                break
+            # The learner drives (with a decaying share of expert steps), the expert labels.
+            beta = dagger.expert_share_decay ** round_index
+            new_obs, new_labels, _ = roll_out(learner, run.seed + 1000 * round_index, beta)
+            observations = np.concatenate([observations, new_obs])
+            labels = np.concatenate([labels, new_labels])
+            checkpoint.save(round_index + 1, observations, labels, model, history, best, rng,
+                            time.time() - t_start, identity)
+    finally:
+        if workers is not None:
+            workers.close()
+        env.close()
+        for e in eval_envs.values():
+            e.close()
     print(f"best round {best[1]}: success {best[0]:.0%}; run directory {run_dir}")
     return 0

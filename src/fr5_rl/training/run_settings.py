@@ -200,6 +200,9 @@ class DaggerRun:
     :param workers: processes that roll out and evaluate episodes; 1: in this process, serially
         (the labels then match runs from before workers existed; with more they depend on the
         count, reproducibly).
+    :param resume: continue ``run_dir`` from the last round it finished (its ``dagger_state/``):
+        the data set, the actor, the history and the random generator come back, so the resumed
+        run labels and fits what the unbroken one would have (given the same ``workers``).
     """
 
     task: str = "grasp"
@@ -213,3 +216,4 @@ class DaggerRun:
     torch_threads: int = 1
     robot: Optional[str] = None
     workers: int = 1
+    resume: bool = False

@@ -1,0 +1,119 @@
+"""One arm's model set from one command (fr5_rl.training.model_set, make_models.py): a tiny
+recipe makes, ships, evaluates and describes a model; a second call keeps what was made; a set
+killed after training or mid-DAgger continues from there."""
+import json
+
+import pytest
+import yaml
+
+from fr5_rl.cli import make_models
+from fr5_rl.config import ConfigError
+from fr5_rl.deploy.policy import load_policy
+from fr5_rl.training import imitation
+from fr5_rl.training.model_set import ModelSet, load_recipe
+
+pytestmark = pytest.mark.slow  # DAgger runs: `make test`, not `make test-fast`
+
+
+def _recipe(tmp_path, rounds=1):
+    recipe = {
+        "seed": 4, "workers": 1,
+        "stages": [{"name": "grasp", "task": "grasp", "hyperparams": "dagger_place_tcp", "rounds": rounds,
+                    "episodes": 2, "epochs": 1}],
+        "evaluation": {"episodes": 2, "seed_start": 1_000_000,
+                       "conditions": {"plain": {}, "noisy": {"randomisation": {"enabled": True,
+                                                                               "observation_noise_std": 0.005}}},
+                       "targets": {"grasp": {"plain": 0.0, "noisy": 0.97}}},
+    }
+    path = tmp_path / f"recipe_{rounds}.yaml"
+    path.write_text(yaml.safe_dump(recipe))
+    return path
+
+
+def _make(tmp_path, recipe, robot="fr3"):
+    return make_models.main(["--robot", robot, "--recipe", str(recipe), "--models-dir", str(tmp_path / "models"),
+                             "--run-root", str(tmp_path / "runs")])
+
+
+def test_a_tiny_recipe_makes_a_shipped_evaluated_described_model(tmp_path, capsys):
+    assert _make(tmp_path, _recipe(tmp_path)) == 0
+    model_dir = tmp_path / "models" / "grasp"
+    policy = load_policy(model_dir, "onnx")
+    assert policy.meta["robot"] == "fr3" and policy.task == "grasp"
+    assert policy.meta["env_overrides"]["action"]["space"] == "tcp"
+    plain = json.loads((model_dir / "eval.json").read_text())
+    noisy = json.loads((model_dir / "eval_noisy.json").read_text())
+    assert plain["episodes"] == noisy["episodes"] == 2 and plain["seeds"] == [1_000_000, 1_000_001]
+    assert noisy["condition_overrides"]["randomisation"]["observation_noise_std"] == 0.005
+    card = (model_dir / "README.md").read_text()
+    assert "# models/fr3/grasp" in card and f"({noisy['successes']}/2;" in card
+    assert "≥ 0 %: **met**" in card  # the plain condition's target, met by any model
+    assert ("≥ 97 %: **met**" in card) == (noisy["success_rate"] >= 0.97)
+    assert ("≥ 97 %: not met" in card) == (noisy["success_rate"] < 0.97)
+    summary = json.loads((tmp_path / "models" / "model_set.json").read_text())
+    assert summary["robot"] == "fr3" and summary["stages"]["grasp"]["evaluation"]["noisy"]["successes"] == \
+        noisy["successes"]
+    assert "model set made in" in capsys.readouterr().out
+
+
+def test_a_second_call_keeps_what_was_made(tmp_path, capsys):
+    recipe = _recipe(tmp_path)
+    assert _make(tmp_path, recipe) == 0
+    model_file = tmp_path / "models" / "grasp" / "model.zip"
+    made = model_file.stat().st_mtime_ns
+    capsys.readouterr()
+    assert _make(tmp_path, recipe) == 0
+    assert "made before, kept" in capsys.readouterr().out
+    assert model_file.stat().st_mtime_ns == made
+
+
+def test_a_set_killed_after_training_ships_and_evaluates_without_training_again(tmp_path):
+    recipe = _recipe(tmp_path)
+    assert _make(tmp_path, recipe) == 0
+    progress_path = tmp_path / "runs" / "progress.json"
+    progress = json.loads(progress_path.read_text())
+    for key in ("evaluation", "card"):
+        del progress["stages"]["grasp"][key]
+    progress_path.write_text(json.dumps(progress))
+    (tmp_path / "models" / "grasp" / "eval.json").unlink()
+    summary_path = tmp_path / "runs" / "grasp" / "summary.json"
+    trained = summary_path.read_text()
+    assert _make(tmp_path, recipe) == 0
+    assert summary_path.read_text() == trained
+    assert (tmp_path / "models" / "grasp" / "eval.json").is_file()
+
+
+def test_a_set_killed_mid_dagger_continues_the_stage_from_its_last_round(tmp_path, capsys):
+    # The stage's DAgger run got through round 1 of 2 before the kill.
+    from fr5_rl.training.run_settings import DaggerRun
+
+    imitation.run_dagger(DaggerRun(task="grasp", hyperparams="dagger_place_tcp", run_dir=tmp_path / "runs" / "grasp",
+                                   seed=4, rounds=1, episodes=2, epochs=1, robot="fr3", workers=1))
+    capsys.readouterr()
+    assert _make(tmp_path, _recipe(tmp_path, rounds=2)) == 0
+    assert "resuming" in capsys.readouterr().out
+    history = json.loads((tmp_path / "runs" / "grasp" / "summary.json").read_text())["history"]
+    assert [h["round"] for h in history] == [0, 1, 2]
+
+
+def test_misuse_is_refused_with_what_to_do(tmp_path, capsys):
+    recipe = _recipe(tmp_path)
+    assert make_models.main(["--robot", "fr3", "--recipe", str(recipe), "--stages", "polish"]) == 2
+    assert "no stage 'polish' in the recipe; its stages: grasp" in capsys.readouterr().err
+    assert _make(tmp_path, recipe, robot="fr3") == 0
+    assert _make(tmp_path, recipe, robot="fr10") == 2
+    assert "belongs to the fr3's model set" in capsys.readouterr().err
+    broken = tmp_path / "broken.yaml"
+    broken.write_text(yaml.safe_dump({**yaml.safe_load(recipe.read_text()),
+                                      "stages": [{"name": "x", "task": "fly", "hyperparams": "dagger_place_tcp",
+                                                  "rounds": 1}]}))
+    with pytest.raises(ConfigError, match="task 'fly' is not one of"):
+        load_recipe(broken)
+
+
+def test_the_shipped_recipe_covers_the_issues_models_and_targets():
+    recipe = load_recipe()
+    assert [stage.task for stage in recipe.stages] == ["reach", "grasp", "place"]
+    perturbed = recipe.evaluation.conditions["perturbed"]["randomisation"]
+    assert perturbed["action_latency_steps"] == [1, 1] and perturbed["observation_noise_std"] == 0.005
+    assert ModelSet("fr10", recipe).models_dir.parts[-2:] == ("models", "fr10")
