@@ -117,3 +117,19 @@ def test_the_shipped_recipe_covers_the_issues_models_and_targets():
     perturbed = recipe.evaluation.conditions["perturbed"]["randomisation"]
     assert perturbed["action_latency_steps"] == [1, 1] and perturbed["observation_noise_std"] == 0.005
     assert ModelSet("fr10", recipe).models_dir.parts[-2:] == ("models", "fr10")
+
+
+def test_a_changed_stage_is_refused_until_remade(tmp_path, capsys):
+    assert _make(tmp_path, _recipe(tmp_path, rounds=1)) == 0
+    summary_path = tmp_path / "runs" / "grasp" / "summary.json"
+    first = json.loads(summary_path.read_text())
+    # The recipe's stage changed (one more round): the made model no longer answers to it.
+    changed = _recipe(tmp_path, rounds=2)
+    assert _make(tmp_path, changed) == 2
+    assert "--remake grasp" in capsys.readouterr().err
+    assert make_models.main(["--robot", "fr3", "--recipe", str(changed), "--models-dir", str(tmp_path / "models"),
+                             "--run-root", str(tmp_path / "runs"), "--remake", "grasp"]) == 0
+    assert "resuming" not in capsys.readouterr().out  # from nothing, not from the old run
+    again = json.loads(summary_path.read_text())
+    assert [h["round"] for h in again["history"]] == [0, 1, 2]
+    assert [h["round"] for h in first["history"]] == [0, 1]

@@ -8,6 +8,7 @@ card. Run it again after a kill: what was made is kept and the rest continues.
 examples:
   rosrun fr5_rl make_models.py --robot fr10
   rosrun fr5_rl make_models.py --robot fr3 --stages reach grasp
+  rosrun fr5_rl make_models.py --robot fr10 --remake place   # after changing the place stage
   make models ROBOT=fr16
 """
 from __future__ import annotations
@@ -28,6 +29,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--robot", choices=robot_names(), required=True, help="the arm (config/robots/)")
     parser.add_argument("--recipe", default=None, help="the recipe (default: config/recipes/model_set.yaml)")
     parser.add_argument("--stages", nargs="+", default=None, metavar="NAME", help="only these stages (default: all)")
+    parser.add_argument("--remake", nargs="+", default=None, metavar="NAME",
+                        help="make these stages again from nothing (after changing their recipe)")
     parser.add_argument("--models-dir", type=Path, default=None, help="where the models go (default: models/<arm>)")
     parser.add_argument("--run-root", type=Path, default=None,
                         help="the training runs and progress.json (default: runs/models_<arm>)")
@@ -40,7 +43,7 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     try:
         recipe = load_recipe(args.recipe) if args.recipe else None
-        result = ModelSet(args.robot, recipe, args.models_dir, args.run_root, args.stages).run()
+        result = ModelSet(args.robot, recipe, args.models_dir, args.run_root, args.stages, args.remake).run()
     except (ConfigError, ModelFilesError) as error:
         return fail("make_models.py", error)
     print(f"{args.robot}: model set made in {result['wall_time_s'] / 60:.1f} min of this machine's time")

@@ -14,6 +14,7 @@ step's wall time are kept in ``<run root>/progress.json``.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import time
@@ -128,20 +129,23 @@ class ModelSet:
     :param run_root: where the training runs and ``progress.json`` go; default ``runs/models_<robot>``
         in the current directory.
     :param stages: only these stages (names), in the recipe's order; default all.
+    :param remake: stages to make again from nothing: their run and their record are discarded.
     """
 
     def __init__(self, robot: str, recipe: Optional[ModelSetRecipe] = None, models_dir: Optional[Path] = None,
-                 run_root: Optional[Path] = None, stages: Optional[List[str]] = None) -> None:
+                 run_root: Optional[Path] = None, stages: Optional[List[str]] = None,
+                 remake: Optional[List[str]] = None) -> None:
         self.robot = check_robot_name(robot)
         self.recipe = recipe or load_recipe()
         self.models_dir = Path(models_dir) if models_dir else package_root() / "models" / self.robot
         self.run_root = Path(run_root) if run_root else Path("runs") / f"models_{self.robot}"
         known = [stage.name for stage in self.recipe.stages]
-        unknown = [name for name in stages or [] if name not in known]
+        unknown = [name for name in list(stages or []) + list(remake or []) if name not in known]
         if unknown:
             raise ConfigError(f"no stage '{unknown[0]}' in the recipe; its stages: {', '.join(known)}")
         self.stages = [stage for stage in self.recipe.stages if stages is None or stage.name in stages]
         self.progress_path = self.run_root / PROGRESS_FILE
+        self.remake = list(remake or [])
 
     # -- progress ------------------------------------------------------------------------------
     def _read_progress(self) -> Dict[str, Any]:
@@ -171,17 +175,23 @@ class ModelSet:
         return run_dir
 
     def _ship(self, stage: Stage, run_dir: Path) -> Path:
-        """The run's best round into ``models/<arm>/<stage>/`` with its ONNX export, checked."""
+        """The run's last round into ``models/<arm>/<stage>/`` with its ONNX export, checked.
+
+        The last, not the round DAgger judged best: each round's judgement is 50 episodes (a
+        90 % learner scores 82–96 % by chance), while the data set only grows. On the FR10's place
+        stage the last of 14 rounds did 94.5 % perturbed over 200 held-out episodes, the round
+        judged best (11) 94.0 %, and 188 against 180 of 200 plain.
+        """
         from .onnx_export import PARITY_TOLERANCE, export, parity
 
-        source = run_dir / "best"
+        source = run_dir / "final"
         target = self.models_dir / stage.name
         target.mkdir(parents=True, exist_ok=True)
         for name in (MODEL_FILE, STATS_FILE):
             shutil.copy2(source / name, target / name)
         summary = json.loads((run_dir / "summary.json").read_text())
         meta = read_meta(source)
-        meta.update({"training_method": "dagger", "training_best_round": summary["best_round"],
+        meta.update({"training_method": "dagger", "training_rounds": stage.rounds,
                      "training_wall_time_s": summary["wall_time_s"], "machine": summary["machine"],
                      "source_run": f"{self.run_root.name}/{stage.name}", "recipe": RECIPE, "stage": stage.name})
         write_json_atomic(target / META_FILE, meta)
@@ -227,8 +237,16 @@ class ModelSet:
         progress = self._read_progress()
         began = time.time()
         spent_before = float(progress.get("wall_time_s", 0.0))
+        for name in self.remake:
+            progress["stages"].pop(name, None)
+            shutil.rmtree(self.run_root / name, ignore_errors=True)
         for stage in self.stages:
-            record = progress["stages"].setdefault(stage.name, {"task": stage.task})
+            definition = dataclasses.asdict(stage)
+            record = progress["stages"].setdefault(stage.name, {"task": stage.task, "definition": definition})
+            if record.get("definition") != definition:
+                raise ConfigError(f"stage '{stage.name}' was begun with another definition in the recipe "
+                                  f"({record.get('definition')}, now {definition}): make it again with "
+                                  f"--remake {stage.name}, or restore the recipe")
             if record.get("card"):
                 print(f"[{self.robot}] {stage.name}: made before, kept ({self.models_dir / stage.name})")
                 continue
@@ -237,7 +255,7 @@ class ModelSet:
                 run_dir = self._train(stage)
                 summary = json.loads((run_dir / "summary.json").read_text())
                 record.update({"trained": True, "dagger_wall_time_s": summary["wall_time_s"],
-                               "samples": summary["history"][-1]["samples"], "best_round": summary["best_round"],
+                               "samples": summary["history"][-1]["samples"], "history": summary["history"],
                                "rounds": stage.rounds, "train_step_s": round(time.time() - t0, 1)})
                 self._save(progress, began, spent_before)
             if not record.get("evaluation"):
@@ -279,6 +297,7 @@ def write_card(model_dir: Path, stage: Stage, record: Mapping[str, Any], recipe:
     """The model's ``README.md``: what it does, how it was made, its figures against the targets."""
     meta = read_meta(model_dir)
     robot = meta["robot"]
+    hyperparams = hyperparameter_path(stage.hyperparams).resolve().relative_to(package_root().resolve()).as_posix()
     targets = recipe.evaluation.targets.get(stage.task, {})
     rows = []
     for name, figures in record["evaluation"].items():
@@ -311,9 +330,8 @@ def write_card(model_dir: Path, stage: Stage, record: Mapping[str, Any], recipe:
         "| | |",
         "|---|---|",
         f"| arm | `{robot}`; loading it as another arm refuses |",
-        f"| algorithm | DAgger from the scripted expert ([config/recipes/{stage.hyperparams}.yaml]"
-        f"(../../../config/recipes/{stage.hyperparams}.yaml)), {stage.rounds} rounds, the best kept (round "
-        f"{record['best_round']}); the actor of an SB3 PPO `MlpPolicy` |",
+        f"| algorithm | DAgger from the scripted expert ([{hyperparams}](../../../{hyperparams})), "
+        f"{stage.rounds} rounds, the last kept; the actor of an SB3 PPO `MlpPolicy` |",
         f"| observation | {meta['observation_size']} values ([docs/environments.md](../../../docs/environments.md)) |",
         f"| action | {meta['action_size']} values: a step of the tcp (`action.space: tcp`) and the gripper width |",
         f"| training | {record['samples']:,} labelled states, {record['dagger_wall_time_s']:.0f} s on "
@@ -329,6 +347,15 @@ def write_card(model_dir: Path, stage: Stage, record: Mapping[str, Any], recipe:
         "`perturbed`: 5 mm observation noise, one whole step of action latency, object mass and friction "
         "±20 %, in every episode.",
     ]
+    history = record.get("history") or []
+    if history:
+        lines += ["", "## How it learnt", "",
+                  "Each round's learner on 50 episodes of the task and 50 of the training world (seeds of their own):",
+                  "", "| round | labelled states | success, task | success, training world | wall time |",
+                  "|---|---|---|---|---|"]
+        for entry in history[1:]:
+            lines.append(f"| {entry['round']} | {entry['samples']:,} | {percent(entry['eval_success'], 0)} | "
+                         f"{percent(entry.get('eval_success_training_env') or 0.0, 0)} | {entry['wall_s']:.0f} s |")
     if failures:
         lines += ["", "Failures: " + "; ".join(f"{name}: " + ", ".join(f"{cause} {count}" for cause, count in
                                                                         sorted(causes.items()))
