@@ -133,3 +133,25 @@ def test_a_changed_stage_is_refused_until_remade(tmp_path, capsys):
     again = json.loads(summary_path.read_text())
     assert [h["round"] for h in again["history"]] == [0, 1, 2]
     assert [h["round"] for h in first["history"]] == [0, 1]
+
+
+def _shipped_arm_models():
+    from fr5_rl.config import package_root
+
+    return sorted(path for path in (package_root() / "models").glob("fr*/*") if (path / "meta.json").is_file())
+
+
+@pytest.mark.parametrize("model_dir", _shipped_arm_models(), ids=lambda path: f"{path.parent.name}/{path.name}")
+def test_each_shipped_arm_model_is_its_directorys_arm_and_its_card_says_its_figures(model_dir):
+    from fr5_rl.deploy.bundle import ModelFilesError
+
+    policy = load_policy(model_dir, "onnx")
+    assert policy.meta["robot"] == model_dir.parent.name
+    assert policy.task == {"reach": "reach", "grasp": "grasp", "place": "place"}[model_dir.name]
+    with pytest.raises(ModelFilesError, match="not the fr5"):
+        load_policy(model_dir, "onnx", expected_robot="fr5")
+    card = (model_dir / "README.md").read_text()
+    for name in ("eval.json", "eval_perturbed.json"):
+        figures = json.loads((model_dir / name).read_text())
+        assert f"({figures['successes']}/{figures['episodes']};" in card
+    assert (model_dir / "model.zip").stat().st_size + (model_dir / "model.onnx").stat().st_size < 10e6
