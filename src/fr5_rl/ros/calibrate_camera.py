@@ -38,7 +38,6 @@ import numpy as np
 from ..help_text import plain
 from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec, robot_names
 from .calibration_motion import CalibrationMove, calibration_poses
-from .robot_description import robot_name
 from ..deploy.joint_state import JointStateReader
 from ..motion_guard import load_guard_settings
 from ..env_config import load_env_config
@@ -409,10 +408,9 @@ def main(argv: Optional[List[str]] = None) -> int:
                                      f"{settings.min_poses - count} more")
         robot = args.robot or DEFAULT_ROBOT
         if not args.bag and args.robot is None:
-            import rospy
+            from .params import described_arm
 
-            if rospy.has_param("/robot_description"):  # the arm the running launch describes
-                robot = robot_name(rospy.get_param("/robot_description"))
+            robot = described_arm(DEFAULT_ROBOT)  # the arm the running launch describes
         calibration = Calibration(settings, args.mount_config or settings.mount_config, robot)
         joint_states = args.joint_states or settings.joint_states_topic
         if args.bag:

@@ -53,8 +53,7 @@ from ..perception.hand_eye import offset_transform
 from ..sim.camera import RENDERERS, SimulatedCamera, depth_to_millimetres
 from ..transforms import load_transform_files, transform_in
 from .images import camera_info_message, image_message
-from .params import exit_if_help_asked, node_parameters
-from .robot_description import robot_name
+from .params import described_arm, exit_if_help_asked, node_parameters
 from .scheduling import lower_priority, runs_idle
 from .static_transforms import to_messages
 from .lifetime import init_node
@@ -180,8 +179,7 @@ class CameraNode:
         self.intrinsics = params.intrinsics()
         # The arm the launch describes (robot_description.py names the URDF after it), as rviz and
         # robot_state_publisher draw it: the camera sees the same arm.
-        robot = robot_name(rospy.get_param("/robot_description")) if rospy.has_param("/robot_description") \
-            else DEFAULT_ROBOT
+        robot = described_arm(DEFAULT_ROBOT)
         spec = load_robot_spec(robot)
         render_pose, camera_frames = params.transforms(robot)
         arguments = (load_env_config({"robot": robot}), list(spec.joint_names) + list(spec.finger_joint_names), render_pose,

@@ -60,7 +60,7 @@ from shape_msgs.msg import SolidPrimitive
 from std_msgs.msg import Float64, Float64MultiArray, String
 from visualization_msgs.msg import MarkerArray
 
-from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec, robot_names
+from ..config import DEFAULT_ROBOT, ConfigError, load_robot_spec
 from ..deploy.joint_state import JointStateReader
 from ..env_config import load_env_config
 from ..perception.camera_model import Intrinsics
@@ -76,9 +76,8 @@ from ..perception.tracker import ObjectTracker, TrackedObject, TrackerSettings, 
 from ..objects import quaternion_of_yaw
 from ..transforms import matrix_from_quaternion, quaternion_from_matrix
 from .images import image_message
-from .params import exit_if_help_asked, node_parameters
+from .params import described_arm, exit_if_help_asked, node_parameters
 from .lifetime import init_node
-from .robot_description import robot_name
 from .object_messages import detected_objects_message, detected_object_markers, primitive_from_shape
 
 TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.ExtrapolationException,
@@ -272,8 +271,7 @@ class DetectorNode:
         self.params = params = node_parameters(DetectorNodeParams, "detector")
         # The arm the launch describes (robot_description.py names the URDF after it): its cell's
         # table and placement region, and its fingers.
-        robot = robot_name(rospy.get_param("/robot_description")) if rospy.has_param("/robot_description") else None
-        robot = robot if robot in robot_names() else DEFAULT_ROBOT
+        robot = described_arm(DEFAULT_ROBOT)
         cell = load_env_config({"robot": robot})
         table = TableRegion.from_env(cell)
         self.detector = ObjectDetector(params.detector, table)

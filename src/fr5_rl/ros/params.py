@@ -1,7 +1,7 @@
 """~private parameters of a node, typed, with their defaults from config/<node>.yaml only."""
 from __future__ import annotations
 
-from typing import Any, Iterator, Mapping, Tuple, Type, TypeVar
+from typing import Any, Iterator, Mapping, Optional, Tuple, Type, TypeVar
 
 import rospy
 
@@ -60,3 +60,16 @@ def exit_if_help_asked(program: str, summary: str, config_name: str = "") -> Non
                   for key, value in _flat(load_yaml(config_name))]
     print("\n".join(lines))
     sys.exit(0)
+
+
+def described_arm(default: Optional[str] = None) -> Optional[str]:
+    """The arm the running launch describes (``/robot_description``, which robot_description.py
+    names after the arm), if it is one of the family's; else ``default`` (no description, or a
+    vendor's URDF)."""
+    from ..config import robot_names
+    from .robot_description import robot_name
+
+    if not rospy.has_param("/robot_description"):
+        return default
+    name = robot_name(rospy.get_param("/robot_description"))
+    return name if name in robot_names() else default

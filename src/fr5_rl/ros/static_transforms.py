@@ -23,9 +23,8 @@ from geometry_msgs.msg import TransformStamped
 
 from ..config import ConfigError, load_typed
 from ..transforms import SHIPPED_TRANSFORMS, StaticTransforms, load_transform_files, quaternion_from_matrix, transforms_of_arm
-from .params import exit_if_help_asked
+from .params import described_arm, exit_if_help_asked
 from .lifetime import init_node
-from .robot_description import robot_name
 
 
 def to_messages(entries: Sequence[Dict], stamp: rospy.Time) -> List[TransformStamped]:
@@ -84,8 +83,7 @@ def main() -> None:
     try:
         files = config_files(rospy.get_param("~config", SHIPPED_TRANSFORMS))
         # The arm the launch describes: the shipped cell's file stands for that arm's own.
-        robot = robot_name(rospy.get_param("/robot_description")) if rospy.has_param("/robot_description") else None
-        files = [str(transforms_of_arm(path, robot)) for path in files]
+        files = [str(transforms_of_arm(path, described_arm())) for path in files]
         entries = load_transform_files(files)
         uncalibrated = simulator_mount_files(files, entries) if rospy.get_param("~warn_simulator_mount", False) else []
     except ConfigError as error:
