@@ -36,7 +36,8 @@ def _make(tmp_path, recipe, robot="fr3"):
 
 
 def test_a_tiny_recipe_makes_a_shipped_evaluated_described_model(tmp_path, capsys):
-    assert _make(tmp_path, _recipe(tmp_path)) == 0
+    recipe = _recipe(tmp_path)
+    assert _make(tmp_path, recipe) == 0
     model_dir = tmp_path / "models" / "grasp"
     policy = load_policy(model_dir, "onnx")
     assert policy.meta["robot"] == "fr3" and policy.task == "grasp"
@@ -47,6 +48,7 @@ def test_a_tiny_recipe_makes_a_shipped_evaluated_described_model(tmp_path, capsy
     assert noisy["condition_overrides"]["randomisation"]["observation_noise_std"] == 0.005
     card = (model_dir / "README.md").read_text()
     assert "# models/fr3/grasp" in card and f"({noisy['successes']}/2;" in card
+    assert f"`{recipe}`" in card and policy.meta["recipe"] == str(recipe)  # the recipe it was made by
     assert "≥ 0 %: **met**" in card  # the plain condition's target, met by any model
     assert ("≥ 97 %: **met**" in card) == (noisy["success_rate"] >= 0.97)
     assert ("≥ 97 %: not met" in card) == (noisy["success_rate"] < 0.97)

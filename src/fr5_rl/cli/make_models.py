@@ -43,7 +43,8 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     try:
         recipe = load_recipe(args.recipe) if args.recipe else None
-        result = ModelSet(args.robot, recipe, args.models_dir, args.run_root, args.stages, args.remake).run()
+        result = ModelSet(args.robot, recipe, args.models_dir, args.run_root, args.stages, args.remake,
+                          args.recipe).run()
     except (ConfigError, ModelFilesError) as error:
         return fail("make_models.py", error)
     print(f"{args.robot}: model set made in {result['wall_time_s'] / 60:.1f} min of this machine's time")

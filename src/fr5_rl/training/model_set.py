@@ -130,11 +130,13 @@ class ModelSet:
         in the current directory.
     :param stages: only these stages (names), in the recipe's order; default all.
     :param remake: stages to make again from nothing: their run and their record are discarded.
+    :param recipe_name: what the models' ``meta.json`` and cards name as their recipe (the file
+        ``recipe`` was read from); default the shipped one's.
     """
 
     def __init__(self, robot: str, recipe: Optional[ModelSetRecipe] = None, models_dir: Optional[Path] = None,
                  run_root: Optional[Path] = None, stages: Optional[List[str]] = None,
-                 remake: Optional[List[str]] = None) -> None:
+                 remake: Optional[List[str]] = None, recipe_name: Optional[str] = None) -> None:
         self.robot = check_robot_name(robot)
         self.recipe = recipe or load_recipe()
         self.models_dir = Path(models_dir) if models_dir else package_root() / "models" / self.robot
@@ -146,6 +148,7 @@ class ModelSet:
         self.stages = [stage for stage in self.recipe.stages if stages is None or stage.name in stages]
         self.progress_path = self.run_root / PROGRESS_FILE
         self.remake = list(remake or [])
+        self.recipe_name = recipe_name or f"config/{RECIPE}"
 
     # -- progress ------------------------------------------------------------------------------
     def _read_progress(self) -> Dict[str, Any]:
@@ -193,7 +196,7 @@ class ModelSet:
         meta = read_meta(source)
         meta.update({"training_method": "dagger", "training_rounds": stage.rounds,
                      "training_wall_time_s": summary["wall_time_s"], "machine": summary["machine"],
-                     "source_run": f"{self.run_root.name}/{stage.name}", "recipe": RECIPE, "stage": stage.name})
+                     "source_run": f"{self.run_root.name}/{stage.name}", "recipe": self.recipe_name, "stage": stage.name})
         write_json_atomic(target / META_FILE, meta)
         export(target)
         worst = parity(target, PARITY_OBSERVATIONS)
@@ -265,13 +268,13 @@ class ModelSet:
                                         for name, summary in self._evaluate(stage, model_dir).items()}
                 record["ship_and_evaluate_s"] = round(time.time() - t0, 1)
                 self._save(progress, began, spent_before)
-            write_card(self.models_dir / stage.name, stage, record, self.recipe)
+            write_card(self.models_dir / stage.name, stage, record, self.recipe, self.recipe_name)
             record["card"] = True
             self._save(progress, began, spent_before)
             figures = ", ".join(f"{name} {value['successes']}/{value['episodes']}"
                                 for name, value in record["evaluation"].items())
             print(f"[{self.robot}] {stage.name}: {figures}")
-        result = {"robot": self.robot, "recipe": RECIPE, "wall_time_s": progress["wall_time_s"],
+        result = {"robot": self.robot, "recipe": self.recipe_name, "wall_time_s": progress["wall_time_s"],
                   "machine": machine_description(),
                   "stages": {name: record for name, record in progress["stages"].items()}}
         write_json_atomic(self.models_dir / SET_FILE, result)
@@ -293,11 +296,16 @@ def _figures(summary: Mapping[str, Any]) -> Dict[str, Any]:
                                           "failures", "by_object", "seeds")}
 
 
-def write_card(model_dir: Path, stage: Stage, record: Mapping[str, Any], recipe: ModelSetRecipe) -> Path:
-    """The model's ``README.md``: what it does, how it was made, its figures against the targets."""
+def write_card(model_dir: Path, stage: Stage, record: Mapping[str, Any], recipe: ModelSetRecipe,
+               recipe_name: str = f"config/{RECIPE}") -> Path:
+    """The model's ``README.md``: what it does, how it was made, its figures against the targets.
+
+    :param recipe_name: the recipe file, as the package's ``config/...`` (a link) or any path.
+    """
     meta = read_meta(model_dir)
     robot = meta["robot"]
     hyperparams = hyperparameter_path(stage.hyperparams).resolve().relative_to(package_root().resolve()).as_posix()
+    recipe_link = f"[{recipe_name}](../../../{recipe_name})" if recipe_name.startswith("config/") else f"`{recipe_name}`"
     targets = recipe.evaluation.targets.get(stage.task, {})
     rows = []
     for name, figures in record["evaluation"].items():
@@ -318,7 +326,7 @@ def write_card(model_dir: Path, stage: Stage, record: Mapping[str, Any], recipe:
         f"# models/{robot}/{stage.name}",
         "",
         f"The {stage.task} policy of the **FAIRINO {robot.upper()}**, made by the arm's model-set recipe "
-        f"(`make models ROBOT={robot}`, [config/{RECIPE}](../../../config/{RECIPE}), stage `{stage.name}`). "
+        f"(`make models ROBOT={robot}`, {recipe_link}, stage `{stage.name}`). "
         "Objects of every kind: boxes at any yaw and cylinders, drawn per episode. Actions are steps of the tcp "
         "pointing down, turned into joint increments by the arm's inverse kinematics.",
         "",
