@@ -50,6 +50,7 @@ def test_a_tiny_recipe_makes_a_shipped_evaluated_described_model(tmp_path, capsy
     assert "# models/fr3/grasp" in card and f"({noisy['successes']}/2;" in card
     assert f"`{recipe}`" in card and policy.meta["recipe"] == str(recipe)  # the recipe it was made by
     assert "≥ 0 %: **met**" in card  # the plain condition's target, met by any model
+    assert "`perturbed`:" not in card  # only the conditions it was judged in are described
     assert ("≥ 97 %: **met**" in card) == (noisy["success_rate"] >= 0.97)
     assert ("≥ 97 %: not met" in card) == (noisy["success_rate"] < 0.97)
     summary = json.loads((tmp_path / "models" / "model_set.json").read_text())
@@ -113,11 +114,17 @@ def test_misuse_is_refused_with_what_to_do(tmp_path, capsys):
         load_recipe(broken)
 
 
-def test_the_shipped_recipe_covers_the_issues_models_and_targets():
+def test_the_shipped_recipes_perturbed_world_is_the_fr5_cards():
+    """The arms' "perturbed" figures compare with the FR5's "all perturbations" only if they are
+    the same world: the recipe's randomisation must be the one models/place was judged in."""
+    from fr5_rl.config import package_root
+
     recipe = load_recipe()
-    assert [stage.task for stage in recipe.stages] == ["reach", "grasp", "place"]
-    perturbed = recipe.evaluation.conditions["perturbed"]["randomisation"]
-    assert perturbed["action_latency_steps"] == [1, 1] and perturbed["observation_noise_std"] == 0.005
+    assert sorted(stage.task for stage in recipe.stages) == ["grasp", "place", "reach"]
+    fr5_card = json.loads((package_root() / "docs" / "robustness" / "fr5" / "place_all_together.json").read_text())
+    ours = recipe.evaluation.conditions["perturbed"]["randomisation"]
+    for key, value in fr5_card["env_overrides"]["randomisation"].items():
+        assert ours[key] == value, key
     assert ModelSet("fr10", recipe).models_dir.parts[-2:] == ("models", "fr10")
 
 
@@ -149,7 +156,7 @@ def test_each_shipped_arm_model_is_its_directorys_arm_and_its_card_says_its_figu
 
     policy = load_policy(model_dir, "onnx")
     assert policy.meta["robot"] == model_dir.parent.name
-    assert policy.task == {"reach": "reach", "grasp": "grasp", "place": "place"}[model_dir.name]
+    assert policy.task == {stage.name: stage.task for stage in load_recipe().stages}[model_dir.name]
     with pytest.raises(ModelFilesError, match="not the fr5"):
         load_policy(model_dir, "onnx", expected_robot="fr5")
     card = (model_dir / "README.md").read_text()

@@ -64,17 +64,23 @@ class Stage:
 @dataclass(frozen=True)
 class Evaluation:
     """How each model is judged: ``episodes`` held-out placements from ``seed_start`` in each
-    condition (environment overrides over the model's own observation and action), and the
-    success each task must reach in a condition (``targets[task][condition]``)."""
+    condition (environment overrides over the model's own observation and action), what each
+    condition is in words (for the cards), and the success each task must reach in a condition
+    (``targets[task][condition]``)."""
 
     episodes: int
     seed_start: int
     conditions: Dict[str, Dict[str, Any]]
+    descriptions: Dict[str, str] = field(default_factory=dict)
     targets: Dict[str, Dict[str, float]] = field(default_factory=dict)
 
     def check(self, source: str) -> None:
         if self.episodes < 1:
             raise ConfigError(f"{source}: evaluation.episodes must be at least 1, got {self.episodes}")
+        for name in self.descriptions:
+            if name not in self.conditions:
+                raise ConfigError(f"{source}: evaluation.descriptions names condition '{name}', "
+                                  f"not one of {', '.join(self.conditions)}")
         for task, by_condition in self.targets.items():
             unknown = [name for name in by_condition if name not in self.conditions]
             if unknown:
@@ -307,8 +313,11 @@ def write_card(model_dir: Path, stage: Stage, record: Mapping[str, Any], recipe:
     hyperparams = hyperparameter_path(stage.hyperparams).resolve().relative_to(package_root().resolve()).as_posix()
     recipe_link = f"[{recipe_name}](../../../{recipe_name})" if recipe_name.startswith("config/") else f"`{recipe_name}`"
     targets = recipe.evaluation.targets.get(stage.task, {})
+    # The recipe's order (a record read back from JSON has its keys sorted).
+    judged = [name for name in recipe.evaluation.conditions if name in record["evaluation"]]
     rows = []
-    for name, figures in record["evaluation"].items():
+    for name in judged:
+        figures = record["evaluation"][name]
         low, high = figures["success_rate_95ci"]
         kinds = ", ".join(f"{kind} {value['successes']}/{value['episodes']}"
                           for kind, value in figures["by_object"].items())
@@ -319,7 +328,7 @@ def write_card(model_dir: Path, stage: Stage, record: Mapping[str, Any], recipe:
         rows.append(f"| {name} ([{file_name}]({file_name})) | **{percent(figures['success_rate'])}** "
                     f"({figures['successes']}/{figures['episodes']}; 95 % CI {percent(low)}–{percent(high)}) | {kinds} | "
                     f"{verdict} |")
-    failures = {name: figures["failures"] for name, figures in record["evaluation"].items() if figures["failures"]}
+    failures = {name: record["evaluation"][name]["failures"] for name in judged if record["evaluation"][name]["failures"]}
     seeds = next(iter(record["evaluation"].values()))["seeds"]
     machine = meta.get("machine") or {}
     lines = [
@@ -351,10 +360,11 @@ def write_card(model_dir: Path, stage: Stage, record: Mapping[str, Any], recipe:
         "| condition | success | by object | target (issue #55) |",
         "|---|---|---|---|",
         *rows,
-        "",
-        "`perturbed`: 5 mm observation noise, one whole step of action latency, object mass and friction "
-        "±20 %, in every episode.",
     ]
+    descriptions = recipe.evaluation.descriptions
+    for name in judged:
+        if name in descriptions:
+            lines += ["", f"`{name}`: {descriptions[name]}"]
     history = record.get("history") or []
     if history:
         lines += ["", "## How it learnt", "",
