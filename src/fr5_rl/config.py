@@ -182,6 +182,11 @@ class RobotSpec:
         """m from the last joint's frame (the wrist centre) to the tcp along its z."""
         return self.flange_offset + self.tcp_offset
 
+    @property
+    def arm_span(self) -> float:
+        """m of upper arm and forearm (|a2| + |a3| of the DH table): what each arm's cell is sized by."""
+        return float(abs(self.joint_origins_xyz[2][0]) + abs(self.joint_origins_xyz[3][0]))
+
 
 def load_robot_spec(robot: str = DEFAULT_ROBOT) -> RobotSpec:
     """Read ``config/robots/<robot>.yaml`` (and the gripper) into a :class:`RobotSpec`, checking
