@@ -47,3 +47,45 @@ def test_the_shipped_file_stands_for_the_arms_cell_and_a_calibration_is_kept(rob
     mine = tmp_path / "my_mount.yaml"
     assert transforms_of_arm(mine, robot) == mine
     assert transforms_of_arm("static_transforms", DEFAULT_ROBOT) == "static_transforms"
+
+
+def _starts_the_detector_sees(robot: str, placements: int) -> list:
+    """Of ``placements`` episode starts of the place task (objects of every kind, the arm at its
+    noisy home pose), the object positions the detector does not report from the arm's cell camera."""
+    from fr5_rl.config import load_yaml
+    from fr5_rl.envs import FR5Env
+    from fr5_rl.perception.detector import Detection, DetectorSettings, ObjectDetector, TableRegion
+    from fr5_rl.sim.camera import SimulatedCamera
+
+    camera_cfg, intrinsics = load_yaml("camera"), _intrinsics()
+    entries = load_transform_files([camera_cfg["mount_config"], camera_cfg["frames_config"]], robot)
+    pose = transform_in(entries, camera_cfg["base_frame"], camera_cfg["frame_id"])
+    env = FR5Env("place", config={"robot": robot, "object": {"variety": {"enabled": True}},
+                                  "observation": {"object_features": True}})
+    names = list(env.robot_spec.joint_names) + list(env.robot_spec.finger_joint_names)
+    camera = SimulatedCamera(env.cfg, names, pose, intrinsics.opengl_projection(camera_cfg["near"], camera_cfg["far"]),
+                             intrinsics.width, intrinsics.height, camera_cfg["near"], camera_cfg["far"], "tiny")
+    detector = ObjectDetector(DetectorSettings.from_yaml(), TableRegion.from_env(env.cfg))
+    unseen = []
+    try:
+        for seed in range(8_000_000, 8_000_000 + placements):
+            env.reset(seed=seed)
+            states, pose_of_object, scene = env.episode.joint_states(), env.episode.object_pose(), env.episode.scene()
+            camera.set_joints(dict(zip(states.names, states.positions)))
+            camera.set_object(scene.object_shape, scene.object_dims, pose_of_object.position, pose_of_object.quaternion)
+            _, depth = camera.render()
+            if not isinstance(detector.detect(depth, intrinsics, pose), Detection):
+                unseen.append(tuple(round(v, 3) for v in pose_of_object.position[:2]))
+    finally:
+        camera.close()
+        env.close()
+    return unseen
+
+
+@pytest.mark.parametrize("robot", robot_names())
+def test_the_arm_at_home_hides_no_object_from_its_cell_camera(robot):
+    """The arm starts every episode at home: its gripper must not stand between the camera and any
+    object, or the policy node waits for a first target that never comes. The FR3's family home
+    (forearm horizontal) hung its gripper 0.18 m over the region: 3 of these 60 starts (22 of 200)
+    hidden, two rehearsal episodes of 20 lost (stop 68); raised, none."""
+    assert _starts_the_detector_sees(robot, 60) == []
