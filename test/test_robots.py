@@ -50,6 +50,18 @@ def test_every_arm_builds_its_environment_with_its_cell_and_stays_within_its_rat
         env.close()
 
 
+@pytest.mark.parametrize("robot", robot_names())
+def test_the_arm_span_is_its_upper_arm_and_forearm_from_the_dh_table(robot):
+    """``RobotSpec.arm_span`` (the expert's carry scales with it) against the DH lengths in the
+    arm's file, and the cells' sizing rule (each cell is the FR5's scaled by span / 0.82)."""
+    from fr5_rl.config import robot_config
+
+    dh = robot_config(robot)["dh"]
+    assert load_robot_spec(robot).arm_span == pytest.approx(abs(dh["a2"]) + abs(dh["a3"]))
+    width_ratio = load_env_config({"robot": robot}).table.size[1] / load_env_config({"robot": "fr5"}).table.size[1]
+    assert width_ratio == pytest.approx(load_robot_spec(robot).arm_span / load_robot_spec("fr5").arm_span, abs=0.01)
+
+
 def test_a_step_faster_than_the_arms_slowest_joint_is_refused_for_that_arm():
     fr5_cap = float(load_robot_spec("fr5").velocity_limits.min()) * 0.02  # 180 deg/s: 0.0628 rad a step
     load_env_config({"action": {"max_joint_step": fr5_cap}})
