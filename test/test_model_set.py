@@ -142,6 +142,11 @@ def test_a_changed_stage_is_refused_until_remade(tmp_path, capsys):
     again = json.loads(summary_path.read_text())
     assert [h["round"] for h in again["history"]] == [0, 1, 2]
     assert [h["round"] for h in first["history"]] == [0, 1]
+    # The set's time is the kept stage's own; the first make of it counts only in the machine's.
+    made = json.loads((tmp_path / "models" / "model_set.json").read_text())
+    stage = made["stages"]["grasp"]
+    assert made["wall_time_s"] == pytest.approx(stage["dagger_wall_time_s"] + stage["ship_and_evaluate_s"], abs=0.2)
+    assert made["machine_time_s"] > made["wall_time_s"] + first["wall_time_s"] * 0.5
 
 
 def _shipped_arm_models():

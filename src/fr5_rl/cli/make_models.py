@@ -47,5 +47,6 @@ def main(argv: Optional[List[str]] = None) -> int:
                           args.recipe).run()
     except (ConfigError, ModelFilesError) as error:
         return fail("make_models.py", error)
-    print(f"{args.robot}: model set made in {result['wall_time_s'] / 60:.1f} min of this machine's time")
+    print(f"{args.robot}: model set made in {result['wall_time_s'] / 60:.1f} min (its stages'; this machine has spent "
+          f"{result['machine_time_s'] / 60:.1f} min on it, stages made again included)")
     return 0

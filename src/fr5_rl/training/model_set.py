@@ -280,8 +280,10 @@ class ModelSet:
             figures = ", ".join(f"{name} {value['successes']}/{value['episodes']}"
                                 for name, value in record["evaluation"].items())
             print(f"[{self.robot}] {stage.name}: {figures}")
-        result = {"robot": self.robot, "recipe": self.recipe_name, "wall_time_s": progress["wall_time_s"],
-                  "machine": machine_description(),
+        # The set's time is its kept stages' own; the machine's, every call's, stages made again included.
+        result = {"robot": self.robot, "recipe": self.recipe_name,
+                  "wall_time_s": round(sum(stage_time_s(record) for record in progress["stages"].values()), 1),
+                  "machine_time_s": progress["wall_time_s"], "machine": machine_description(),
                   "stages": {name: record for name, record in progress["stages"].items()}}
         write_json_atomic(self.models_dir / SET_FILE, result)
         return result
@@ -289,6 +291,12 @@ class ModelSet:
     def _save(self, progress: Dict[str, Any], began: float, spent_before: float) -> None:
         progress["wall_time_s"] = round(spent_before + time.time() - began, 1)
         self._write_progress(progress)
+
+
+def stage_time_s(record: Mapping[str, Any]) -> float:
+    """s a made stage took: its DAgger run (over every call, where a killed one was resumed) and its
+    shipping and evaluation."""
+    return float(record.get("dagger_wall_time_s", 0.0)) + float(record.get("ship_and_evaluate_s", 0.0))
 
 
 def percent(share: float, digits: int = 1) -> str:
