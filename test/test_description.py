@@ -481,14 +481,23 @@ def test_generator_reproduces_committed_files(tmp_path: Path) -> None:
             f"config/{name} differs from the generator output: run make meshes"
 
 
+# The FR3's forearm is raised 33 degrees at home: the family's hung its gripper between the cell
+# camera and the objects under its wrist (test_arm_cells.py).
+HOMES = {**{name: HOME for name in ROBOTS}, "fr3": (0.0, -1.570796, 1.0, -1.0, -1.570796, 0.0)}
+
+
 @pytest.mark.parametrize("name", ROBOTS)
 def test_every_arm_has_a_description_and_the_home_pose_is_the_configs(name: str) -> None:
     from fr5_rl.config import load_robot_spec, robot_names
+    from fr5_rl.kinematics import ForwardKinematics
 
     assert sorted(robot_names()) == sorted(ROBOTS)
     spec = load_robot_spec(name)
-    assert spec.home_joint_positions == pytest.approx(HOME)
+    assert spec.home_joint_positions == pytest.approx(HOMES[name])
     assert spec.tcp_offset == pytest.approx(TCP_OFFSET)
+    # Every home points the gripper straight down (the expert keeps that rotation's yaw).
+    _, rotation = ForwardKinematics(spec).tcp_pose(spec.home_joint_positions)
+    assert np.asarray(rotation)[:, 2] == pytest.approx([0.0, 0.0, -1.0], abs=1e-5)
 
 
 def test_view_robot_starts_at_home() -> None:
