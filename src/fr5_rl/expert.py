@@ -11,6 +11,7 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from .config import DEFAULT_ROBOT, load_robot_spec
 from .control import yaw_of_rotation
 from .envs import FR5Env
 from .kinematics import InverseKinematics
@@ -59,14 +60,14 @@ class ScriptedExpert:
     keep_releasing_within = 0.018  # m from the goal within which letting go, once begun, goes on
     # m above the table over which a carried object rises at the lift's speed, not the carry's:
     # at 8 mm a step from a standstill the FR3's arm (110 N m shoulder) snatched a 52 mm box up
-    # faster than the pads held it, and it turned out of them (10 of 30 placements knocked over).
+    # faster than the pads held it, and it turned out of them (9 of 30 placements knocked over).
     gentle_lift_height = 0.05
-    # m of upper arm and forearm (the FR5's) the speeds were tuned for. A shorter arm carries
+    # The arm whose span (RobotSpec.arm_span) the speeds were tuned for. A shorter arm carries
     # slower, in proportion (its cell is as much smaller: the episode keeps its pace): the FR3's
-    # weaker shoulder shook objects out of the pads at the FR5's 8 mm a step (5 of 100 in the
-    # training world with the gentle lift). A longer arm keeps the FR5's speeds: at 6 mm the
-    # FR10's long carries ran out of time (7 of 100).
-    reference_arm_span = 0.82
+    # weaker shoulder still shook objects out of the pads at 8 mm a step (6 of 100 knocked over in
+    # the training world with the gentle lift). A longer arm keeps these speeds: at 6 mm the
+    # FR10's long carries ran out of time (8 of 100, against 2).
+    speeds_tuned_on = DEFAULT_ROBOT
     phase_speed = {"hover": 0.015, "descend": 0.006, "close": 0.006, "lift": 0.006,
                    "carry": 0.008, "lower": 0.004, "release": 0.004, "retreat": 0.008}
 
@@ -83,7 +84,7 @@ class ScriptedExpert:
         self._max_step = self.env.cfg.action.max_joint_step
         # The arm's action as a tcp step (action.space: tcp) rather than joint increments.
         self._tcp_space = self.env.cfg.action.space == "tcp"
-        self._carry_speed = self.phase_speed["carry"] * min(1.0, spec.arm_span / self.reference_arm_span)
+        self._carry_speed = self.phase_speed["carry"] * min(1.0, spec.arm_span / load_robot_spec(self.speeds_tuned_on).arm_span)
         self.phase = "hover"
 
     def reset(self) -> None:
