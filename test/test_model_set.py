@@ -149,6 +149,36 @@ def test_a_changed_stage_is_refused_until_remade(tmp_path, capsys):
     assert made["machine_time_s"] > made["wall_time_s"] + first["wall_time_s"] * 0.5
 
 
+def test_a_made_stage_is_evaluated_again_as_it_is(tmp_path, capsys):
+    import hashlib
+
+    recipe = _recipe(tmp_path)
+    runs = ["--robot", "fr3", "--recipe", str(recipe), "--models-dir", str(tmp_path / "models"),
+            "--run-root", str(tmp_path / "runs")]
+    assert make_models.main(runs + ["--evaluate-again", "grasp"]) == 2  # nothing made yet
+    assert "is not made" in capsys.readouterr().err
+    assert _make(tmp_path, recipe) == 0
+    model_dir = tmp_path / "models" / "grasp"
+    made = {name: hashlib.sha256((model_dir / name).read_bytes()).hexdigest() for name in ("model.zip", "model.onnx")}
+    first_set = json.loads((tmp_path / "models" / "model_set.json").read_text())
+    (model_dir / "eval.json").unlink()
+    assert make_models.main(runs + ["--evaluate-again", "grasp"]) == 0
+    assert "resuming" not in capsys.readouterr().out  # no training
+    assert {name: hashlib.sha256((model_dir / name).read_bytes()).hexdigest() for name in made} == made
+    plain = json.loads((model_dir / "eval.json").read_text())  # written again
+    assert plain["episodes"] == 2
+    card = (model_dir / "README.md").read_text()
+    assert "Evaluated again on" in card and f"({plain['successes']}/2;" in card
+    again = json.loads((tmp_path / "models" / "model_set.json").read_text())
+    stage = again["stages"]["grasp"]
+    assert stage["evaluated_again"]["evaluate_s"] > 0
+    assert again["wall_time_s"] == first_set["wall_time_s"]  # the set's own time is its making
+    assert make_models.main(runs + ["--evaluate-again", "grasp", "--remake", "grasp"]) == 2
+    # A stage left out of --stages would be judged again and its card never written: refused.
+    with pytest.raises(ConfigError, match="--stages leaves it out"):
+        ModelSet("fr3", load_recipe(), stages=["reach"], evaluate_again=["place"])
+
+
 def _shipped_arm_models():
     from fr5_rl.config import package_root
 

@@ -215,7 +215,7 @@ def test_the_expert_closes_low_on_a_short_box():
         env.close()
 
 
-@pytest.mark.parametrize("task, expected", [("place", 0.01), ("grasp", 0.001)])
+@pytest.mark.parametrize("task, expected", [("place", 0.02), ("grasp", 0.001)])
 def test_the_objects_torsional_friction_is_the_tasks(task, expected):
     """The place task's carried objects turn in the grasp unless the pads' contact patch resists
     (env.yaml place.simulation); grasp keeps what its shipped model was trained with."""
@@ -507,3 +507,62 @@ def test_the_expert_carries_without_shaking_the_object_out_of_a_small_arms_hand(
     finally:
         env.close()
     assert sum(bool(info["is_success"]) for info in results) >= 18, [info.get("failure") for info in results]
+
+
+def test_the_expert_holds_a_box_up_until_a_slow_turn_is_done():
+    """A learner a few steps behind on the turn to the goal's yaw was told to lower and let go over
+    the goal, and set boxes down 12 and 32 degrees off. The expert now counts the turn still to
+    make as distance to the goal. Here its own turn is halved while it carries (a lagging learner):
+    25 of 30 placed before the change (four timed out and one fell, the boxes 15-33 degrees off),
+    30 of 30 after."""
+    from fr5_rl.training.hyperparameters import read_hyperparameter_file
+
+    env = FR5Env("place", config=read_hyperparameter_file("dagger_place_tcp")["env"])
+    outcomes = []
+    try:
+        for seed in range(7_500_000, 7_500_030):
+            expert = ScriptedExpert(env)
+            env.reset(seed=seed)
+            for _ in range(env.task.max_steps):
+                action = expert.act()
+                if expert.phase in ("carry", "lower"):
+                    action[5] *= 0.5  # the turn about the vertical (action.space: tcp)
+                _, _, terminated, truncated, info = env.step(action)
+                if terminated or truncated:
+                    break
+            yaw_error = math.degrees(env.task.yaw_error(env.task_state()))
+            outcomes.append((bool(info["is_success"]), info.get("failure"), round(yaw_error, 1)))
+    finally:
+        env.close()
+    assert sum(success for success, _, _ in outcomes) >= 28, [outcome for outcome in outcomes if not outcome[0]]
+
+
+def test_a_carried_object_stays_upright_between_the_pads():
+    """PyBullet meets a cylinder with one point per pad, at different heights on the two pads, and
+    only the torsional friction holds the object from turning about the line between them. At 10
+    mm of it (``place.simulation.object_spinning_friction`` 0.01) carried objects turned up to 17
+    degrees in the FR16's pads at a constant speed (3 of these 40; 1 of 40 on the FR10, 26 degrees)
+    and the FR16's expert placed 281 of 300 under the perturbations; at 20 mm, for the rubber patch
+    one simulated point lacks (docs/experiments.md, stop 69), none turned more than 8 degrees and it
+    placed 296."""
+    from fr5_rl.training.hyperparameters import read_hyperparameter_file
+
+    env = FR5Env("place", config={**read_hyperparameter_file("dagger_place_tcp")["env"], "robot": "fr16"})
+    outcomes = []
+    try:
+        for seed in range(7_400_000, 7_400_040):
+            expert = ScriptedExpert(env)
+            env.reset(seed=seed)
+            worst_tilt = 0.0
+            for _ in range(env.task.max_steps):
+                _, _, terminated, truncated, info = env.step(expert.act())
+                state = env.task_state()
+                if state.fingers_object_contact == 2:
+                    worst_tilt = max(worst_tilt, math.degrees(math.acos(min(1.0, float(state.object_up_axis[2])))))
+                if terminated or truncated:
+                    break
+            outcomes.append((seed, bool(info["is_success"]), round(worst_tilt, 1)))
+    finally:
+        env.close()
+    assert all(tilt <= 10.0 for _, _, tilt in outcomes), [outcome for outcome in outcomes if outcome[2] > 10.0]
+    assert sum(success for _, success, _ in outcomes) >= 38, [outcome for outcome in outcomes if not outcome[1]]

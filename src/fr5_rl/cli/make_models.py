@@ -9,6 +9,7 @@ examples:
   rosrun fr5_rl make_models.py --robot fr10
   rosrun fr5_rl make_models.py --robot fr3 --stages reach grasp
   rosrun fr5_rl make_models.py --robot fr10 --remake place   # after changing the place stage
+  rosrun fr5_rl make_models.py --robot fr3 --evaluate-again place   # after changing the simulator
   make models ROBOT=fr16
 """
 from __future__ import annotations
@@ -31,6 +32,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--stages", nargs="+", default=None, metavar="NAME", help="only these stages (default: all)")
     parser.add_argument("--remake", nargs="+", default=None, metavar="NAME",
                         help="make these stages again from nothing (after changing their recipe)")
+    parser.add_argument("--evaluate-again", nargs="+", default=None, metavar="NAME",
+                        help="evaluate these made stages again, their models as they are (after a change to the "
+                             "simulator), and write their cards again")
     parser.add_argument("--models-dir", type=Path, default=None, help="where the models go (default: models/<arm>)")
     parser.add_argument("--run-root", type=Path, default=None,
                         help="the training runs and progress.json (default: runs/models_<arm>)")
@@ -44,7 +48,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     try:
         recipe = load_recipe(args.recipe) if args.recipe else None
         result = ModelSet(args.robot, recipe, args.models_dir, args.run_root, args.stages, args.remake,
-                          args.recipe).run()
+                          args.recipe, args.evaluate_again).run()
     except (ConfigError, ModelFilesError) as error:
         return fail("make_models.py", error)
     print(f"{args.robot}: model set made in {result['wall_time_s'] / 60:.1f} min (its stages'; this machine has spent "

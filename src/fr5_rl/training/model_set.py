@@ -136,24 +136,36 @@ class ModelSet:
         in the current directory.
     :param stages: only these stages (names), in the recipe's order; default all.
     :param remake: stages to make again from nothing: their run and their record are discarded.
+    :param evaluate_again: made stages whose shipped model is evaluated again, as it is (after a
+        change to the simulator), and whose card is written again with the new figures.
     :param recipe_name: what the models' ``meta.json`` and cards name as their recipe (the file
         ``recipe`` was read from); default the shipped one's.
     """
 
     def __init__(self, robot: str, recipe: Optional[ModelSetRecipe] = None, models_dir: Optional[Path] = None,
                  run_root: Optional[Path] = None, stages: Optional[List[str]] = None,
-                 remake: Optional[List[str]] = None, recipe_name: Optional[str] = None) -> None:
+                 remake: Optional[List[str]] = None, recipe_name: Optional[str] = None,
+                 evaluate_again: Optional[List[str]] = None) -> None:
         self.robot = check_robot_name(robot)
         self.recipe = recipe or load_recipe()
         self.models_dir = Path(models_dir) if models_dir else package_root() / "models" / self.robot
         self.run_root = Path(run_root) if run_root else Path("runs") / f"models_{self.robot}"
         known = [stage.name for stage in self.recipe.stages]
-        unknown = [name for name in list(stages or []) + list(remake or []) if name not in known]
+        unknown = [name for name in list(stages or []) + list(remake or []) + list(evaluate_again or [])
+                   if name not in known]
         if unknown:
             raise ConfigError(f"no stage '{unknown[0]}' in the recipe; its stages: {', '.join(known)}")
         self.stages = [stage for stage in self.recipe.stages if stages is None or stage.name in stages]
         self.progress_path = self.run_root / PROGRESS_FILE
         self.remake = list(remake or [])
+        self.evaluate_again = list(evaluate_again or [])
+        both = sorted(set(self.remake) & set(self.evaluate_again))
+        if both:
+            raise ConfigError(f"stage '{both[0]}' is both to be made again and evaluated again: choose one")
+        left_out = [name for name in self.evaluate_again if name not in [stage.name for stage in self.stages]]
+        if left_out:
+            raise ConfigError(f"stage '{left_out[0]}' is to be evaluated again but --stages leaves it out: "
+                              "name it in --stages too")
         self.recipe_name = recipe_name or f"config/{RECIPE}"
 
     # -- progress ------------------------------------------------------------------------------
@@ -249,6 +261,24 @@ class ModelSet:
         for name in self.remake:
             progress["stages"].pop(name, None)
             shutil.rmtree(self.run_root / name, ignore_errors=True)
+        again = [stage for stage in self.stages if stage.name in self.evaluate_again]
+        for stage in again:  # every one checked before any is evaluated
+            record = progress["stages"].get(stage.name) or {}
+            if not record.get("card"):
+                raise ConfigError(f"stage '{stage.name}' of the {self.robot}'s set is not made ({self.progress_path} "
+                                  "has no card for it): make it, or evaluate a model on its own with evaluate.py")
+            if record.get("definition") != dataclasses.asdict(stage):
+                raise ConfigError(f"stage '{stage.name}' was made by another definition in the recipe: make it again "
+                                  f"with --remake {stage.name}, or restore the recipe")
+        for stage in again:
+            name, record = stage.name, progress["stages"][stage.name]
+            t0 = time.time()
+            record["evaluation"] = {condition: _figures(summary)
+                                    for condition, summary in self._evaluate(stage, self.models_dir / name).items()}
+            # Not part of making the stage: kept apart from ship_and_evaluate_s.
+            record["evaluated_again"] = {"date": time.strftime("%Y-%m-%d"), "evaluate_s": round(time.time() - t0, 1)}
+            record["card"] = False
+            self._save(progress, began, spent_before)
         for stage in self.stages:
             definition = dataclasses.asdict(stage)
             record = progress["stages"].setdefault(stage.name, {"task": stage.task, "definition": definition})
@@ -373,6 +403,10 @@ def write_card(model_dir: Path, stage: Stage, record: Mapping[str, Any], recipe:
     for name in judged:
         if name in descriptions:
             lines += ["", f"`{name}`: {descriptions[name]}"]
+    again = record.get("evaluated_again")
+    if again:
+        lines += ["", f"Evaluated again on {again['date']}, the model as it was made, in the simulator of that day "
+                  "(`make_models.py --evaluate-again`); how it learnt, below, is from its making."]
     history = record.get("history") or []
     if history:
         lines += ["", "## How it learnt", "",
