@@ -32,6 +32,21 @@ def run_expert(env, seed, max_steps=400):
     return info
 
 
+def run_expert_measuring_the_hold(env, seed, measure):
+    """One expert episode from ``seed``; returns its last info and the largest ``measure(env)``
+    over the steps where both pads hold the object (0 if they never do)."""
+    expert = ScriptedExpert(env)
+    env.reset(seed=seed)
+    largest, info = 0.0, {}
+    for _ in range(env.task.max_steps):
+        _, _, terminated, truncated, info = env.step(expert.act())
+        if env.task_state().fingers_object_contact == 2:
+            largest = max(largest, measure(env))
+        if terminated or truncated:
+            break
+    return info, largest
+
+
 def test_each_tasks_observation_blocks_are_the_observations_table():
     for name, task in TASKS.items():
         assert TASK_BLOCKS[name] == (task.include_lift, task.include_goal), name
@@ -471,21 +486,12 @@ def test_coupled_fingers_keep_a_carried_object_centred(coupled):
     drift with the object along the closing axis: 7 mm (median) to 20 mm over 60 carries."""
     env = FR5Env("place", config={"object": {"variety": {"enabled": True}}, "observation": {"object_features": True},
                                   "place": {"simulation": {"fingers_coupled": coupled}}})
-    expert = ScriptedExpert(env)
-    largest = []
+    def drift(env):
+        left, right = env.episode.plant.robot.joint_lists_with_fingers()[0][6:8]
+        return abs(left - right) / 2.0
+
     try:
-        for seed in range(9400, 9406):
-            env.reset(seed=seed)
-            drift = 0.0
-            for _ in range(env.task.max_steps):
-                _, _, terminated, truncated, _ = env.step(expert.act())
-                state = env.task_state()
-                if state.fingers_object_contact == 2:
-                    left, right = env.episode.plant.robot.joint_lists_with_fingers()[0][6:8]
-                    drift = max(drift, abs(left - right) / 2.0)
-                if terminated or truncated:
-                    break
-            largest.append(drift)
+        largest = [run_expert_measuring_the_hold(env, seed, drift)[1] for seed in range(9400, 9406)]
     finally:
         env.close()
     if coupled:
@@ -548,19 +554,13 @@ def test_a_carried_object_stays_upright_between_the_pads():
     from fr5_rl.training.hyperparameters import read_hyperparameter_file
 
     env = FR5Env("place", config={**read_hyperparameter_file("dagger_place_tcp")["env"], "robot": "fr16"})
+    def tilt(env):
+        return math.degrees(math.acos(min(1.0, float(env.task_state().object_up_axis[2]))))
+
     outcomes = []
     try:
         for seed in range(7_400_000, 7_400_040):
-            expert = ScriptedExpert(env)
-            env.reset(seed=seed)
-            worst_tilt = 0.0
-            for _ in range(env.task.max_steps):
-                _, _, terminated, truncated, info = env.step(expert.act())
-                state = env.task_state()
-                if state.fingers_object_contact == 2:
-                    worst_tilt = max(worst_tilt, math.degrees(math.acos(min(1.0, float(state.object_up_axis[2])))))
-                if terminated or truncated:
-                    break
+            info, worst_tilt = run_expert_measuring_the_hold(env, seed, tilt)
             outcomes.append((seed, bool(info["is_success"]), round(worst_tilt, 1)))
     finally:
         env.close()
