@@ -49,9 +49,10 @@ def test_the_shipped_file_stands_for_the_arms_cell_and_a_calibration_is_kept(rob
     assert transforms_of_arm("static_transforms", DEFAULT_ROBOT) == "static_transforms"
 
 
-def _starts_the_detector_sees(robot: str, placements: int) -> list:
+def _starts_the_detector_misses(robot: str, placements: int) -> list:
     """Of ``placements`` episode starts of the place task (objects of every kind, the arm at its
-    noisy home pose), the object positions the detector does not report from the arm's cell camera."""
+    noisy home pose), the object positions (x, y, m) the detector does not report from the arm's
+    cell camera."""
     from fr5_rl.config import load_yaml
     from fr5_rl.envs import FR5Env
     from fr5_rl.perception.detector import Detection, DetectorSettings, ObjectDetector, TableRegion
@@ -88,4 +89,4 @@ def test_the_arm_at_home_hides_no_object_from_its_cell_camera(robot):
     object, or the policy node waits for a first target that never comes. The FR3's family home
     (forearm horizontal) hung its gripper 0.18 m over the region: 3 of these 60 starts (22 of 200)
     hidden, two rehearsal episodes of 20 lost (stop 68); raised, none."""
-    assert _starts_the_detector_sees(robot, 60) == []
+    assert _starts_the_detector_misses(robot, 60) == []

@@ -233,17 +233,25 @@ def test_the_expert_closes_low_on_a_short_box():
 @pytest.mark.parametrize("task, expected", [("place", 0.02), ("grasp", 0.001)])
 def test_the_objects_torsional_friction_is_the_tasks(task, expected):
     """The place task's carried objects turn in the grasp unless the pads' contact patch resists
-    (env.yaml place.simulation); grasp keeps what its shipped model was trained with."""
+    (env.yaml place.simulation); grasp keeps what its shipped model was trained with. The
+    simulator node (at its own physics step) builds the same world as gym: the rehearsal's figures
+    are this world's."""
     import pybullet
 
+    from fr5_rl.episode_runner import simulator_episode
+    from fr5_rl.sim.node_params import load_sim_node_params
+
     env = FR5Env(task)
+    node_episode = simulator_episode(task, None, {}, load_sim_node_params("fairino"))
     try:
         env.reset(seed=0)
-        world = env.episode.plant.world
-        spinning = pybullet.getDynamicsInfo(world.object_id, -1, physicsClientId=world.client)[7]
-        assert spinning == pytest.approx(expected)
+        node_episode.start(0)
+        for world in (env.episode.plant.world, node_episode.plant.world):
+            spinning = pybullet.getDynamicsInfo(world.object_id, -1, physicsClientId=world.client)[7]
+            assert spinning == pytest.approx(expected)
     finally:
         env.close()
+        node_episode.close()
 
 
 class TestTheExpertsLabelsWhereLearnersStalled:
